@@ -1,0 +1,32 @@
+"""What every pipeline step's entry point shares: CPU thread limits and one-line errors with a non-zero exit."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable
+
+from refinenet.errors import RefineNetError
+
+EXIT_BAD_INPUT = 2
+
+
+def limit_threads(threads: int) -> None:
+    """Use at most `threads` cores in BLAS, OpenMP and torch, so parallel jobs never oversubscribe the machine."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = str(threads)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
+
+
+def run(parser: argparse.ArgumentParser, main: Callable[[argparse.Namespace], None]) -> None:
+    """Parse arguments and run `main`; a bad file or parameter ends with `error: <what>: <problem>` and exit 2."""
+    parser.add_argument("--threads", type=int, default=1, help="CPU threads this job may use")
+    args = parser.parse_args()
+    limit_threads(args.threads)
+    try:
+        main(args)
+    except RefineNetError as err:
+        print(f"error: {err}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)

@@ -1,0 +1,147 @@
+"""The pipeline's steps, declared once for both Snakemake and DVC.
+
+Each `Step` names the Snakemake rule that does the work, the params keys it reads, the code it runs and
+the files it reads and writes. The Snakefile takes rule params and code inputs from here; `dvc.yaml` is
+generated from here (`python -m refinenet.workflow`), and a test checks the two agree, so changing a key
+reruns exactly the same steps in both tools.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from refinenet import config
+from refinenet.sources import CloudSpec, list_clouds
+
+BASELINES = ("pca", "jet")
+DVC_FILE = Path("dvc.yaml")
+
+
+def clouds(params: dict[str, Any], split: str | None = None) -> list[CloudSpec]:
+    """The run's clouds (optionally of one split), from the resolved params."""
+    return [c for c in list_clouds(params["data"], params["noise"]) if split in (None, c.split)]
+
+
+def cloud_path(spec: CloudSpec) -> str:
+    return f"results/clouds/{spec.key}.npz"
+
+
+def normals_path(method: str, spec: CloudSpec) -> str:
+    return f"results/normals/{method}/{spec.key}.npy"
+
+
+@dataclass(frozen=True)
+class Step:
+    """One pipeline step: a Snakemake rule and the DVC stage that runs its jobs."""
+
+    stage: str
+    rule: str
+    smk: str
+    script: str
+    modules: tuple[str, ...]
+    keys: tuple[str, ...]
+    deps: tuple[str, ...]
+    outs: tuple[str, ...]
+    targets: Callable[[dict[str, Any]], list[str]]
+    metrics: tuple[str, ...] = ()
+
+    @property
+    def code(self) -> list[str]:
+        """Files whose change must rerun the step: its rule file, stage script and library modules."""
+        return [f"workflow/rules/{self.smk}", self.script, *(f"src/refinenet/{m}.py" for m in self.modules)]
+
+
+_CLOUD_MODULES = ("sources", "shapes", "meshes", "io", "noise", "atomic", "errors")
+_TABLE_OUTS = ("reports/table_baselines.csv", "reports/table_baselines.tex", "reports/per_cloud_baselines.csv")
+
+STEPS: dict[str, Step] = {s.stage: s for s in (
+    Step(
+        stage="test_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py",
+        modules=_CLOUD_MODULES, keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
+        targets=lambda p: [cloud_path(c) for c in clouds(p, "test")],
+    ),
+    Step(
+        stage="baselines", rule="baseline_normals", smk="baselines.smk", script="stages/baseline_normals.py",
+        modules=("baselines", "neighbors", "io", "atomic", "errors"), keys=("baselines",),
+        deps=("results/clouds/test",), outs=tuple(f"results/normals/{m}/test" for m in BASELINES),
+        targets=lambda p: [normals_path(m, c) for m in BASELINES for c in clouds(p, "test")],
+    ),
+    Step(
+        stage="table_baselines", rule="table_baselines", smk="tables.smk", script="stages/table.py",
+        modules=("tables", "metrics", "io", "atomic", "errors"),
+        keys=("data.source", "data.n_points", "evaluation.protocol"),
+        deps=("results/clouds/test", *(f"results/normals/{m}/test" for m in BASELINES)),
+        outs=_TABLE_OUTS, metrics=("reports/metrics.json",),
+        targets=lambda p: [*_TABLE_OUTS, "reports/metrics.json"],
+    ),
+)}
+
+
+def _exists(tree: Any, dotted: str) -> bool:
+    for part in dotted.split("."):
+        if not isinstance(tree, dict) or part not in tree:
+            return False
+        tree = tree[part]
+    return True
+
+
+def tracked_keys(raw: dict[str, Any], step: Step) -> list[str]:
+    """The params keys a step depends on: `profile`, its own keys, and every profile's overrides of them."""
+    keys = ["profile", *step.keys]
+    for name, block in (raw.get("profiles") or {}).items():
+        keys += [f"profiles.{name}.{k}" for k in step.keys if _exists(block, k)]
+    return keys
+
+
+def tracked_params(raw: dict[str, Any], step: Step) -> dict[str, Any]:
+    """Values of `tracked_keys` as Snakemake rule params: resolved for the step's keys, raw for overrides."""
+    resolved = config.resolve(raw)
+    return {k: config.get(raw if k.startswith("profiles.") else resolved, k) for k in tracked_keys(raw, step)}
+
+
+def dvc_yaml(raw: dict[str, Any]) -> dict[str, Any]:
+    """The dvc.yaml that mirrors the Snakemake rules: one stage per step, run through the bridge."""
+    stages: dict[str, Any] = {}
+    for step in STEPS.values():
+        stage: dict[str, Any] = {
+            "cmd": f"python -m refinenet.bridge run {step.stage}",
+            "deps": [*step.code, *step.deps],
+            "params": tracked_keys(raw, step),
+            "outs": [{o: {"cache": False}} if o.startswith("reports/") else o for o in step.outs],
+        }
+        if step.metrics:
+            stage["metrics"] = [{m: {"cache": False}} for m in step.metrics]
+        stages[step.stage] = stage
+    return {"stages": stages}
+
+
+def render_dvc_yaml(raw: dict[str, Any]) -> str:
+    header = "# Generated by `python -m refinenet.workflow` from src/refinenet/workflow.py; do not edit by hand.\n"
+    return header + yaml.safe_dump(dvc_yaml(raw), sort_keys=False, width=120)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Write dvc.yaml from the pipeline's step declarations.")
+    parser.add_argument("--params", default="params.yaml")
+    parser.add_argument("--check", action="store_true", help="exit 1 if dvc.yaml is out of date")
+    args = parser.parse_args(argv)
+    text = render_dvc_yaml(yaml.safe_load(Path(args.params).read_text()))
+    if args.check:
+        current = DVC_FILE.read_text() if DVC_FILE.exists() else ""
+        if current != text:
+            print("dvc.yaml is out of date: run `python -m refinenet.workflow`", file=sys.stderr)
+            return 1
+        return 0
+    DVC_FILE.write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

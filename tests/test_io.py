@@ -1,0 +1,118 @@
+"""Readers and writers: round trips, and one clear error per kind of bad file."""
+
+import numpy as np
+import pytest
+
+from refinenet.errors import InputError
+from refinenet.io import Cloud, read_cloud, read_normals, write_cloud, write_normals, write_ply, write_xyz_normals
+
+
+@pytest.fixture
+def cloud():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(50, 3))
+    normals = rng.normal(size=(50, 3))
+    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def test_xyz_normals_round_trip(tmp_path, cloud):
+    points, normals = cloud
+    write_xyz_normals(tmp_path / "shape", points, normals)
+    back = read_cloud(tmp_path / "shape.xyz")
+    np.testing.assert_allclose(back.points, points, atol=1e-8)
+    np.testing.assert_allclose(back.normals, normals, atol=1e-7)
+
+
+def test_six_column_xyz_and_npy(tmp_path, cloud):
+    points, normals = cloud
+    np.savetxt(tmp_path / "six.xyz", np.hstack([points, normals]))
+    np.save(tmp_path / "six.npy", np.hstack([points, normals]))
+    for name in ("six.xyz", "six.npy"):
+        back = read_cloud(tmp_path / name)
+        np.testing.assert_allclose(back.normals, normals, atol=1e-12)
+
+
+def test_ply_and_pcd_round_trip(tmp_path, cloud):
+    points, normals = cloud
+    write_ply(tmp_path / "c.ply", points, normals)
+    back = read_cloud(tmp_path / "c.ply")
+    np.testing.assert_allclose(back.points, points, atol=1e-12)
+    np.testing.assert_allclose(back.normals, normals, atol=1e-12)
+    import open3d as o3d
+
+    o3d.io.write_point_cloud(str(tmp_path / "c.pcd"), o3d.io.read_point_cloud(str(tmp_path / "c.ply")))
+    np.testing.assert_allclose(read_cloud(tmp_path / "c.pcd").points, points, atol=1e-12)
+
+
+def test_npz_record_keeps_metadata(tmp_path, cloud):
+    points, normals = cloud
+    write_cloud(tmp_path / "r.npz", Cloud(points, normals, {"seed": 7, "noise_percent": 0.1}))
+    back = read_cloud(tmp_path / "r.npz")
+    assert back.meta == {"seed": 7, "noise_percent": 0.1}
+    np.testing.assert_array_equal(back.points, points)
+
+
+def test_normals_files(tmp_path, cloud):
+    _, normals = cloud
+    for name in ("n.npy", "n.normals"):
+        write_normals(tmp_path / name, normals)
+        np.testing.assert_allclose(read_normals(tmp_path / name, 50), normals, atol=1e-6)
+    with pytest.raises(InputError, match="49 points"):
+        read_normals(tmp_path / "n.npy", 49)
+
+
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        ("", "empty"),
+        ("1 2 3\n4 5 6\n7 8\n", "malformed"),  # truncated last line
+        ("1 2 3\n4 five 6\n", "malformed"),  # non-numeric
+        ("1 2 3\nnan 5 6\n", "NaN or inf"),
+        ("1 2 3\ninf 5 6\n", "NaN or inf"),
+        ("1 2 3 4\n5 6 7 8\n", "4 columns"),
+    ],
+)
+def test_bad_xyz_files(tmp_path, content, problem):
+    path = tmp_path / "bad.xyz"
+    path.write_text(content)
+    with pytest.raises(InputError, match=problem) as info:
+        read_cloud(path)
+    message = str(info.value)
+    assert str(path) in message and "\n" not in message
+
+
+def test_too_few_points(tmp_path):
+    path = tmp_path / "few.xyz"
+    path.write_text("0 0 0\n1 0 0\n0 1 0\n")
+    with pytest.raises(InputError, match="3 points, fewer than the 100"):
+        read_cloud(path, min_points=100)
+
+
+def test_mismatched_normals_file(tmp_path):
+    (tmp_path / "a.xyz").write_text("0 0 0\n1 0 0\n0 1 0\n")
+    (tmp_path / "a.normals").write_text("0 0 1\n0 0 1\n")
+    with pytest.raises(InputError, match="2 normals for 3 points"):
+        read_cloud(tmp_path / "a.xyz")
+
+
+def test_bad_binary_files(tmp_path):
+    (tmp_path / "e.ply").write_bytes(b"")
+    (tmp_path / "t.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\n")
+    (tmp_path / "b.npy").write_bytes(b"not numpy")
+    for name in ("e.ply", "t.ply", "b.npy"):
+        with pytest.raises(InputError, match=name):
+            read_cloud(tmp_path / name)
+    with pytest.raises(InputError, match="unsupported"):
+        read_cloud(tmp_path / "x.txt")
+
+
+def test_failed_write_leaves_nothing(tmp_path):
+    class Boom(RuntimeError):
+        pass
+
+    from refinenet.atomic import atomic_path
+
+    with pytest.raises(Boom), atomic_path(tmp_path / "out.npy") as tmp:
+        tmp.write_text("partial")
+        raise Boom
+    assert list(tmp_path.iterdir()) == []
