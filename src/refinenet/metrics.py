@@ -8,7 +8,7 @@ exactly without re-reading every point.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -65,10 +65,14 @@ class ErrorStats:
         return asdict(self)
 
 
+#: The fields of ErrorStats, in constructor order (the columns of per-cloud statistics files).
+STAT_FIELDS = tuple(f.name for f in fields(ErrorStats))
+
+
 def pooled(stats: Iterable[ErrorStats]) -> ErrorStats:
     """All points of several clouds taken together."""
     stats = list(stats)
-    return ErrorStats(*(sum(getattr(s, f) for s in stats) for f in ("n", "sum_deg", "sum_sq_deg", "below_5", "below_10")))
+    return ErrorStats(*(sum(getattr(s, f) for s in stats) for f in STAT_FIELDS))
 
 
 def synthetic_category(stats: Sequence[ErrorStats]) -> dict[str, float]:

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from refinenet.metrics import ErrorStats, average_over_categories, pcpnet_category, synthetic_category
+from refinenet.metrics import STAT_FIELDS, ErrorStats, average_over_categories, pcpnet_category, synthetic_category
 
 #: Column order of the paper's synthetic tables (table:synthetic_result).
 SYNTHETIC_ORDER = ("BigNoise", "SharpFeature", "RichFeature", "SmoothSurface")
@@ -15,7 +15,6 @@ SYNTHETIC_ORDER = ("BigNoise", "SharpFeature", "RichFeature", "SmoothSurface")
 METHOD_NAMES = {"pca": "PCA", "jet": "Jet", "mfps": "MFPS", "simple_mfps": "simple MFPS", "refinenet": "Refine-Net"}
 METRIC_NAMES = {"mean": "mean", "rmse": "rmse", "pgp5": "PGP5", "pgp10": "PGP10"}
 HIGHER_IS_BETTER = {"pgp5", "pgp10"}
-STAT_FIELDS = ("n", "sum_deg", "sum_sq_deg", "below_5", "below_10")
 
 
 def stats_row(method: str, category: str, name: str, stats: ErrorStats) -> dict[str, object]:

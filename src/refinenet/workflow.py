@@ -64,19 +64,19 @@ _TABLE_OUTS = ("reports/table_baselines.csv", "reports/table_baselines.tex", "re
 STEPS: dict[str, Step] = {s.stage: s for s in (
     Step(
         stage="test_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py",
-        modules=_CLOUD_MODULES, keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
+        modules=(*_CLOUD_MODULES, "stage"), keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
         targets=lambda p: [cloud_path(c) for c in clouds(p, "test")],
     ),
     Step(
         stage="baselines", rule="baseline_normals", smk="baselines.smk", script="stages/baseline_normals.py",
-        modules=("baselines", "neighbors", "io", "atomic", "errors"), keys=("baselines",),
+        modules=("baselines", "neighbors", "io", "atomic", "errors", "stage"), keys=("baselines",),
         deps=("results/clouds/test",), outs=tuple(f"results/normals/{m}/test" for m in BASELINES),
         targets=lambda p: [normals_path(m, c) for m in BASELINES for c in clouds(p, "test")],
     ),
     Step(
         stage="table_baselines", rule="table_baselines", smk="tables.smk", script="stages/table.py",
-        modules=("tables", "metrics", "io", "atomic", "errors"),
-        keys=("data.source", "data.n_points", "evaluation.protocol"),
+        modules=("tables", "metrics", "io", "atomic", "errors", "stage"),
+        keys=("data.source", "data.path", "data.n_points", "baselines", "evaluation.protocol"),
         deps=("results/clouds/test", *(f"results/normals/{m}/test" for m in BASELINES)),
         outs=_TABLE_OUTS, metrics=("reports/metrics.json",),
         targets=lambda p: [*_TABLE_OUTS, "reports/metrics.json"],

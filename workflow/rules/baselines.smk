@@ -1,13 +1,6 @@
 # Classical baselines of the paper's tables: PCA and Jet, K = 100 (K = 200 for BigNoise).
 
 
-def baseline_k(w):
-    b = P["baselines"]
-    if w.category == "BigNoise":
-        return b["big_noise_k"]
-    return b["pca_k"] if w.method == "pca" else b["jet_k"]
-
-
 rule baseline_normals:
     message:
         "{wildcards.method} normals of {wildcards.split}/{wildcards.category}/{wildcards.name}"
@@ -25,6 +18,8 @@ rule baseline_normals:
     benchmark:
         "logs/baseline_normals/{method}/{split}/{category}/{name}.benchmark.tsv"
     threads: 1
+    conda:
+        "../envs/refinenet.yaml"
     shell:
         "python -m stages.baseline_normals --method {wildcards.method} --cloud {input.cloud}"
         " --k {params.k} --degree {params.degree} --out {output} --threads {threads} 2>&1 | tee {log}"

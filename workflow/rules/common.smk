@@ -35,3 +35,24 @@ def record_in_dvc():
     Skipped when DVC itself runs Snakemake (the bridge sets REFINENET_BRIDGE)."""
     if not os.environ.get("REFINENET_BRIDGE"):
         shell("python -m refinenet.bridge record")
+
+
+def baseline_k(w):
+    b = P["baselines"]
+    if w.category == "BigNoise":
+        return b["big_noise_k"]
+    return b["pca_k"] if w.method == "pca" else b["jet_k"]
+
+
+def table_caption():
+    d, b = P["data"], P["baselines"]
+    return (
+        f"Unoriented angular error (degrees) per category, {P['evaluation']['protocol']} protocol. "
+        f"Profile {P['profile']}; data: {d['source']}"
+        + (f" ({d['path']})" if d["path"] else "")
+        + f", {d['n_points']} points per cloud; PCA/Jet K = {b['pca_k']}/{b['jet_k']} "
+        f"({b['big_noise_k']} for BigNoise)."
+    )
+
+
+TEST_CLOUDS = [wf.cloud_path(c) for c in CLOUDS.values() if c.split == "test"]

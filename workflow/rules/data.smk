@@ -19,6 +19,8 @@ rule cloud:
     benchmark:
         "logs/cloud/{split}/{category}/{name}.benchmark.tsv"
     threads: 1
+    conda:
+        "../envs/refinenet.yaml"
     shell:
         "python -m stages.cloud --split {wildcards.split} --category {wildcards.category}"
         " --name {wildcards.name} --origin {params.origin:q} {params.noise} --n-points {params.n_points}"

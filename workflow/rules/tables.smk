@@ -1,20 +1,6 @@
 # Result tables: evaluate normals against ground truth and write CSV, booktabs LaTeX and metrics.json.
 
 
-def table_caption():
-    d, b = P["data"], P["baselines"]
-    return (
-        f"Unoriented angular error (degrees) per category, {P['evaluation']['protocol']} protocol. "
-        f"Profile {P['profile']}; data: {d['source']}"
-        + (f" ({d['path']})" if d["path"] else "")
-        + f", {d['n_points']} points per cloud; PCA/Jet K = {b['pca_k']}/{b['jet_k']} "
-        f"({b['big_noise_k']} for BigNoise)."
-    )
-
-
-TEST_CLOUDS = [wf.cloud_path(c) for c in CLOUDS.values() if c.split == "test"]
-
-
 rule table_baselines:
     message:
         "table of the PCA and Jet baselines"
@@ -36,6 +22,8 @@ rule table_baselines:
         "logs/table_baselines.log",
     benchmark:
         "logs/table_baselines.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
     shell:
         "python -m stages.table --methods {params.methods} --clouds {input.clouds} --normals {input.normals}"
         " --protocol {params.protocol} --metrics mean rmse --caption {params.caption:q} --label table_baselines"

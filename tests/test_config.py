@@ -1,0 +1,69 @@
+"""params.yaml: profiles resolve as documented, and every invalid value is reported by its key."""
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from refinenet import config
+from refinenet.errors import ParamsError
+
+REPO = Path(__file__).resolve().parents[1]
+RAW = yaml.safe_load((REPO / "params.yaml").read_text())
+SCHEMA = REPO / "workflow/schemas/params.schema.yaml"
+
+
+def resolve(raw):
+    return config.resolve(raw, schema=SCHEMA)
+
+
+def with_value(dotted, value):
+    raw = copy.deepcopy(RAW)
+    *parents, last = dotted.split(".")
+    node = raw
+    for p in parents:
+        node = node[p]
+    node[last] = value
+    return raw
+
+
+def test_profiles_override_only_their_keys():
+    for name in ("smoke", "cpu", "paper"):
+        p = resolve(with_value("profile", name))
+        assert p["profile"] == name
+        assert p["baselines"] == RAW["baselines"]
+    assert resolve(with_value("profile", "paper"))["data"]["n_points"] == 100000
+    assert resolve(with_value("profile", "smoke"))["data"]["max_shapes"] == 1
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("profile", "fast", "profile: 'fast' is not one of the profiles"),
+        ("baselines.pca_k", -3, "baselines.pca_k: -3 is less than the minimum"),
+        ("baselines.jet_k", "many", "baselines.jet_k: 'many' is not of type 'integer'"),
+        ("data.source", "web", "data.source: 'web' is not one of"),
+        ("noise.train", [], "noise.train: [] should be non-empty"),
+        ("evaluation.protocol", "mine", "evaluation.protocol"),
+        ("profiles.smoke", {"data": {"n_pointz": 5}}, "profiles.smoke.data.n_pointz: overrides a key that does not"),
+    ],
+)
+def test_invalid_values_name_their_key(key, value, message):
+    with pytest.raises(ParamsError) as info:
+        resolve(with_value(key, value))
+    text = str(info.value)
+    assert text.startswith("params.yaml: ") and message in text and "\n" not in text
+
+
+def test_inactive_profile_is_validated_too():
+    raw = with_value("profiles.paper", {"baselines": {"pca_kk": 1}})
+    with pytest.raises(ParamsError, match="profiles.paper.baselines.pca_kk"):
+        resolve(raw)
+
+
+def test_unreadable_file(tmp_path):
+    bad = tmp_path / "params.yaml"
+    bad.write_text("profile: [unclosed\n")
+    with pytest.raises(ParamsError, match="cannot be read as YAML"):
+        config.load(bad, SCHEMA)

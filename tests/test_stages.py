@@ -1,0 +1,55 @@
+"""Stage entry points: a bad input file or value ends with one line naming it, exit 2, and no output."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def stage(module: str, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", f"stages.{module}", *args], cwd=REPO, capture_output=True, text=True)
+
+
+BAD_FILES = {
+    "empty.xyz": "",
+    "truncated.xyz": "0 0 0\n1 0 0\n0 1",
+    "text.xyz": "0 0 0\nx y z\n",
+    "nan.xyz": "0 0 0\nnan 0 1\n",
+    "inf.xyz": "0 0 0\n1 inf 1\n",
+    "columns.xyz": "0 0 0 0\n1 1 1 1\n",
+}
+
+
+@pytest.mark.parametrize("name", [*BAD_FILES, "few.xyz"])
+def test_baseline_stage_rejects_bad_clouds(tmp_path, name):
+    path = tmp_path / name
+    path.write_text(BAD_FILES.get(name, "\n".join(f"{i} {i * i} 0" for i in range(20))))
+    out = tmp_path / "out.npy"
+    run = stage("baseline_normals", "--method", "pca", "--cloud", str(path), "--k", "50", "--out", str(out))
+    assert run.returncode == 2
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {path}:"), run.stderr
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == [name]
+
+
+def test_baseline_stage_writes_normals(tmp_path):
+    rng = np.random.default_rng(0)
+    points = np.c_[rng.uniform(size=(500, 2)), np.zeros(500)]
+    np.savetxt(tmp_path / "plane.xyz", points)
+    run = stage("baseline_normals", "--method", "jet", "--cloud", str(tmp_path / "plane.xyz"), "--k", "20",
+                "--out", str(tmp_path / "plane.normals"))
+    assert run.returncode == 0, run.stderr
+    normals = np.loadtxt(tmp_path / "plane.normals")
+    np.testing.assert_allclose(np.abs(normals[:, 2]), 1, atol=1e-9)
+
+
+def test_cloud_stage_rejects_missing_mesh(tmp_path):
+    out = tmp_path / "c.npz"
+    run = stage("cloud", "--split", "test", "--category", "SharpFeature", "--name", "m",
+                "--origin", str(tmp_path / "missing.off"), "--noise", "0.1", "--n-points", "1000",
+                "--seed", "1", "--out", str(out))
+    assert run.returncode == 2 and "missing.off" in run.stderr and not out.exists()
