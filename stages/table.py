@@ -38,7 +38,7 @@ def main(args: argparse.Namespace) -> None:
     with atomic_path(args.csv) as tmp:
         csv.to_csv(tmp, float_format="%.4f")
     write_text(args.tex, to_latex(table, args.caption, args.label))
-    write_text(args.metrics_json, json.dumps({args.label: csv.to_dict(orient="index")}, indent=2) + "\n")
+    write_text(args.metrics_json, json.dumps(csv.to_dict(orient="index"), indent=2) + "\n")
 
 
 if __name__ == "__main__":

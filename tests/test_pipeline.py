@@ -14,7 +14,7 @@ from refinenet.workflow import STEPS
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
-TABLE = "reports/table_baselines.csv"
+TABLE = "reports/table_synthetic.csv"
 
 
 def sh(cwd: Path, *cmd: str) -> subprocess.CompletedProcess:
@@ -49,7 +49,7 @@ def smoke_copy(tmp: Path) -> Path:
 @pytest.fixture(scope="module")
 def by_snakemake(tmp_path_factory):
     repo = smoke_copy(tmp_path_factory.mktemp("snakemake"))
-    snakemake(repo, "-j2", TABLE)
+    snakemake(repo, "-j2")
     return repo
 
 
@@ -71,13 +71,16 @@ def snakemake_changed_rules(repo: Path) -> set[str]:
 
 def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
     table = pd.read_csv(by_snakemake / TABLE, index_col=0)
-    assert list(table.index) == ["PCA", "Jet"] and "Average/mean" in table.columns
+    assert list(table.index) == ["PCA", "Jet", "MFPS", "simple MFPS"] and "Average/mean" in table.columns
+    # MFPS is built for sharp features: it must beat both baselines there (ALGORITHM.md §2).
+    assert table.loc["MFPS", "SharpFeature/mean"] < min(table.loc["PCA", "SharpFeature/mean"],
+                                                         table.loc["Jet", "SharpFeature/mean"])
     assert dvc_changed_stages(by_snakemake) == set()
     assert "didn't change" in sh(by_snakemake, "dvc", "repro").stdout
 
 
 def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by_snakemake):
-    for name in (TABLE, "reports/per_cloud_baselines.csv", "reports/table_baselines.tex"):
+    for name in (TABLE, "reports/table_synthetic.tex", "reports/per_cloud/table_synthetic.csv", "reports/metrics.json"):
         assert (by_dvc / name).read_text() == (by_snakemake / name).read_text(), name
     assert "Nothing to be done" in snakemake(by_dvc, "-n").stdout
     second = sh(by_dvc, "dvc", "repro").stdout
@@ -85,14 +88,17 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     assert "Running stage" not in second
 
 
+TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
+
+
 @pytest.mark.parametrize(
     ("old", "new", "steps"),
     [
-        ("  jet_k: 100", "  jet_k: 90", {"baselines", "table_baselines"}),
-        ("  protocol: synthetic", "  protocol: pcpnet", {"table_baselines"}),
-        ("seed: 2022", "seed: 7", {"test_clouds"}),
-        ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}",
-         {"test_clouds", "table_baselines"}),
+        ("  jet_k: 100", "  jet_k: 90", {"baselines"} | TABLES),
+        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps", "table_synthetic", "table_synthetic_pgp"}),
+        ("  protocol: synthetic", "  protocol: pcpnet", TABLES),
+        ("seed: 2022", "seed: 7", {"test_clouds", "mfps", "simple_mfps"}),
+        ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}", {"test_clouds"} | TABLES),
     ],
 )
 def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, new, steps):

@@ -90,3 +90,20 @@ def _escape(text: str) -> str:
     for char in "&%$#_":
         text = text.replace(char, "\\" + char)
     return text
+
+
+def caption(title: str, params: dict, methods: Sequence[str]) -> str:
+    """A caption naming the profile, the data and the settings of every method in the table."""
+    d, b, m = params["data"], params["baselines"], params.get("mfps", {})
+    parts = [
+        f"{title}, {params['evaluation']['protocol']} protocol.",
+        f"Profile {params['profile']}; data: {d['source']}" + (f" ({d['path']})" if d["path"] else "")
+        + f", {d['n_points']} points per cloud.",
+    ]
+    if {"pca", "jet"} & set(methods):
+        parts.append(f"PCA/Jet K = {b['pca_k']}/{b['jet_k']} ({b['big_noise_k']} for BigNoise), jet degree "
+                     f"{b['jet_degree']}.")
+    if {"mfps", "simple_mfps"} & set(methods):
+        parts.append(f"MFPS K = {{{', '.join(map(str, m['scales']))}}}, R = {m['trials']}, "
+                     f"theta_t = {m['theta_t']} deg, |A| <= {m['a_max']}, eta = {m['eta']}.")
+    return " ".join(parts)

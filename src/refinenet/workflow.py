@@ -58,28 +58,76 @@ class Step:
         return [f"workflow/rules/{self.smk}", self.script, *(f"src/refinenet/{m}.py" for m in self.modules)]
 
 
-_CLOUD_MODULES = ("sources", "shapes", "meshes", "io", "noise", "atomic", "errors")
-_TABLE_OUTS = ("reports/table_baselines.csv", "reports/table_baselines.tex", "reports/per_cloud_baselines.csv")
+_CLOUD_MODULES = ("sources", "shapes", "meshes", "io", "noise", "atomic", "errors", "stage")
+_STAGE_MODULES = ("io", "atomic", "errors", "stage")
+MFPS_MODULES = ("mfps", "neighbors", "noise")
+
+
+@dataclass(frozen=True)
+class Table:
+    """A results table of the paper: which methods are its rows and which metrics its columns."""
+
+    methods: tuple[str, ...]
+    metrics: tuple[str, ...]
+    title: str
+
+    def outputs(self, name: str) -> tuple[str, ...]:
+        return (f"reports/{name}.csv", f"reports/{name}.tex", f"reports/per_cloud/{name}.csv")
+
+    def metrics_file(self, name: str) -> str:
+        return f"reports/metrics/{name}.json"
+
+
+#: Normal estimators and the params block that configures each (its values are named in table captions).
+METHODS = {"pca": "baselines", "jet": "baselines", "mfps": "mfps", "simple_mfps": "mfps"}
+_SYNTHETIC = ("pca", "jet", "mfps", "simple_mfps")
+TABLES = {
+    "table_baselines": Table(BASELINES, ("mean", "rmse"), "Baselines: unoriented angular error (degrees)"),
+    "table_synthetic": Table(_SYNTHETIC, ("mean", "rmse"), "Synthetic benchmark: unoriented angular error (degrees)"),
+    "table_synthetic_pgp": Table(_SYNTHETIC, ("pgp5", "pgp10"),
+                                 "Synthetic benchmark: proportion of good points (error below 5 and 10 degrees)"),
+}
+
+
+def _normals_step(stage: str, rule: str, smk: str, script: str, modules: tuple[str, ...], keys: tuple[str, ...],
+                  methods: tuple[str, ...]) -> Step:
+    """A step estimating normals of every test cloud with each of `methods`."""
+    return Step(
+        stage=stage, rule=rule, smk=smk, script=script, modules=(*modules, *_STAGE_MODULES), keys=keys,
+        deps=("results/clouds/test",), outs=tuple(f"results/normals/{m}/test" for m in methods),
+        targets=lambda p: [normals_path(m, c) for m in methods for c in clouds(p, "test")],
+    )
+
+
+def _table_step(name: str, table: Table) -> Step:
+    blocks = tuple(dict.fromkeys(METHODS[m] for m in table.methods))
+    return Step(
+        stage=name, rule="table", smk="tables.smk", script="stages/table.py",
+        modules=("tables", "metrics", *_STAGE_MODULES),
+        keys=("data.source", "data.path", "data.n_points", "evaluation.protocol", *blocks),
+        deps=("results/clouds/test", *(f"results/normals/{m}/test" for m in table.methods)),
+        outs=table.outputs(name), metrics=(table.metrics_file(name),),
+        targets=lambda p: [*table.outputs(name), table.metrics_file(name)],
+    )
+
 
 STEPS: dict[str, Step] = {s.stage: s for s in (
     Step(
-        stage="test_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py",
-        modules=(*_CLOUD_MODULES, "stage"), keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
+        stage="test_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py", modules=_CLOUD_MODULES,
+        keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
         targets=lambda p: [cloud_path(c) for c in clouds(p, "test")],
     ),
+    _normals_step("baselines", "baseline_normals", "baselines.smk", "stages/baseline_normals.py",
+                  ("baselines", "neighbors"), ("baselines",), BASELINES),
+    _normals_step("mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",
+                  MFPS_MODULES, ("mfps", "seed"), ("mfps",)),
+    _normals_step("simple_mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",
+                  MFPS_MODULES, ("mfps", "seed"), ("simple_mfps",)),
+    *(_table_step(name, table) for name, table in TABLES.items()),
     Step(
-        stage="baselines", rule="baseline_normals", smk="baselines.smk", script="stages/baseline_normals.py",
-        modules=("baselines", "neighbors", "io", "atomic", "errors", "stage"), keys=("baselines",),
-        deps=("results/clouds/test",), outs=tuple(f"results/normals/{m}/test" for m in BASELINES),
-        targets=lambda p: [normals_path(m, c) for m in BASELINES for c in clouds(p, "test")],
-    ),
-    Step(
-        stage="table_baselines", rule="table_baselines", smk="tables.smk", script="stages/table.py",
-        modules=("tables", "metrics", "io", "atomic", "errors", "stage"),
-        keys=("data.source", "data.path", "data.n_points", "baselines", "evaluation.protocol"),
-        deps=("results/clouds/test", *(f"results/normals/{m}/test" for m in BASELINES)),
-        outs=_TABLE_OUTS, metrics=("reports/metrics.json",),
-        targets=lambda p: [*_TABLE_OUTS, "reports/metrics.json"],
+        stage="metrics", rule="metrics", smk="tables.smk", script="stages/merge_metrics.py",
+        modules=("atomic", "errors", "stage"), keys=(), deps=tuple(t.metrics_file(n) for n, t in TABLES.items()),
+        outs=(), metrics=("reports/metrics.json",), targets=lambda p: ["reports/metrics.json"],
     ),
 )}
 

@@ -9,6 +9,8 @@ rule baseline_normals:
         cloud="results/clouds/{split}/{category}/{name}.npz",
     output:
         "results/normals/{method}/{split}/{category}/{name}.npy",
+    wildcard_constraints:
+        method="|".join(wf.BASELINES),
     params:
         tracked=tracked("baselines"),
         k=baseline_k,

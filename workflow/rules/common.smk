@@ -6,6 +6,8 @@ import sys
 from refinenet import config as params_lib
 from refinenet import workflow as wf
 from refinenet.errors import RefineNetError
+from refinenet.noise import derive_seed
+from refinenet.tables import caption
 
 try:
     P = params_lib.resolve(config)
@@ -18,7 +20,6 @@ wildcard_constraints:
     split="train|test",
     category="[A-Za-z0-9_.+-]+",
     name="[A-Za-z0-9_.+-]+",
-    method="|".join(wf.BASELINES),
 
 
 def cloud_spec(w):
@@ -44,15 +45,5 @@ def baseline_k(w):
     return b["pca_k"] if w.method == "pca" else b["jet_k"]
 
 
-def table_caption():
-    d, b = P["data"], P["baselines"]
-    return (
-        f"Unoriented angular error (degrees) per category, {P['evaluation']['protocol']} protocol. "
-        f"Profile {P['profile']}; data: {d['source']}"
-        + (f" ({d['path']})" if d["path"] else "")
-        + f", {d['n_points']} points per cloud; PCA/Jet K = {b['pca_k']}/{b['jet_k']} "
-        f"({b['big_noise_k']} for BigNoise)."
-    )
-
-
-TEST_CLOUDS = [wf.cloud_path(c) for c in CLOUDS.values() if c.split == "test"]
+TEST_SPECS = [c for c in CLOUDS.values() if c.split == "test"]
+TEST_CLOUDS = [wf.cloud_path(c) for c in TEST_SPECS]
