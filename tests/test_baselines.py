@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from known_shapes import fibonacci_sphere
 
 from refinenet.baselines import jet_normals, pca_normals
 from refinenet.metrics import unoriented_angles
 from refinenet.neighbors import covariances, knn
-
-from known_shapes import fibonacci_sphere
 
 
 def test_knn_includes_self_first_and_rejects_large_k():

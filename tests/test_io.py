@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from refinenet.errors import InputError
-from refinenet.io import Cloud, read_cloud, read_normals, write_cloud, write_normals, write_ply, write_xyz_normals
+from refinenet.io import (
+    Cloud,
+    read_cloud,
+    read_normals,
+    write_cloud,
+    write_normals,
+    write_ply,
+    write_xyz_normals,
+)
 
 
 @pytest.fixture

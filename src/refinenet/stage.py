@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections.abc import Callable
+from typing import TypeVar
 
-from refinenet.errors import RefineNetError
+from refinenet.errors import ParamsError, RefineNetError
+
+T = TypeVar("T")
 
 EXIT_BAD_INPUT = 2
 
@@ -30,3 +34,12 @@ def run(parser: argparse.ArgumentParser, main: Callable[[argparse.Namespace], No
     except RefineNetError as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
+
+
+def config_from_json(cls: type[T], text: str, block: str) -> T:
+    """A config dataclass from a params block passed as JSON; a bad value is reported under the block's key."""
+    try:
+        return cls(**json.loads(text))
+    except (TypeError, ValueError) as err:
+        raise ParamsError(block, str(err)) from None
+

@@ -34,7 +34,23 @@ def cloud_path(spec: CloudSpec) -> str:
 
 
 def normals_path(method: str, spec: CloudSpec) -> str:
-    return f"results/normals/{method}/{spec.key}.npy"
+    """Estimated normals: binary for the intermediate estimators, the PCPNet text format for Refine-Net's output."""
+    return f"results/normals/{method}/{spec.key}.{'normals' if method == REFINENET else 'npy'}"
+
+
+def features_path(spec: CloudSpec) -> str:
+    return f"results/features/{spec.key}.npz"
+
+
+CLUSTER_MODEL = "results/clusters/model.npz"
+MODEL_DIR = "results/models/refinenet"
+CHECKPOINT_DIR = "results/checkpoints/refinenet"
+REFINENET = "refinenet"
+
+
+def trained_marker(cluster: int) -> str:
+    """Written when a cluster's training has finished (early stop, max_epochs or an empty cluster)."""
+    return f"{MODEL_DIR}/cluster_{cluster}/result.json"
 
 
 @dataclass(frozen=True)
@@ -61,6 +77,8 @@ class Step:
 _CLOUD_MODULES = ("sources", "shapes", "meshes", "io", "noise", "atomic", "errors", "stage")
 _STAGE_MODULES = ("io", "atomic", "errors", "stage")
 MFPS_MODULES = ("mfps", "neighbors", "noise")
+_FEATURE_MODULES = ("features", "filtering", "frames", "heightmaps", "neighbors", "noise")
+_NETWORK_MODULES = (*_FEATURE_MODULES, "clustering", "dataset", "model", "patches")
 
 
 @dataclass(frozen=True)
@@ -78,9 +96,10 @@ class Table:
         return f"reports/metrics/{name}.json"
 
 
-#: Normal estimators and the params block that configures each (its values are named in table captions).
-METHODS = {"pca": "baselines", "jet": "baselines", "mfps": "mfps", "simple_mfps": "mfps"}
-_SYNTHETIC = ("pca", "jet", "mfps", "simple_mfps")
+#: Normal estimators and the params blocks that configure each (their values are named in table captions).
+METHODS = {"pca": ("baselines",), "jet": ("baselines",), "mfps": ("mfps",), "simple_mfps": ("mfps",),
+           REFINENET: ("mfps", "features", "clustering", "network", "patches", "training")}
+_SYNTHETIC = ("pca", "jet", "mfps", "simple_mfps", REFINENET)
 TABLES = {
     "table_baselines": Table(BASELINES, ("mean", "rmse"), "Baselines: unoriented angular error (degrees)"),
     "table_synthetic": Table(_SYNTHETIC, ("mean", "rmse"), "Synthetic benchmark: unoriented angular error (degrees)"),
@@ -90,17 +109,18 @@ TABLES = {
 
 
 def _normals_step(stage: str, rule: str, smk: str, script: str, modules: tuple[str, ...], keys: tuple[str, ...],
-                  methods: tuple[str, ...]) -> Step:
-    """A step estimating normals of every test cloud with each of `methods`."""
+                  methods: tuple[str, ...], splits: tuple[str, ...] = ("test",)) -> Step:
+    """A step estimating normals of every cloud of `splits` with each of `methods`."""
     return Step(
         stage=stage, rule=rule, smk=smk, script=script, modules=(*modules, *_STAGE_MODULES), keys=keys,
-        deps=("results/clouds/test",), outs=tuple(f"results/normals/{m}/test" for m in methods),
-        targets=lambda p: [normals_path(m, c) for m in methods for c in clouds(p, "test")],
+        deps=tuple(f"results/clouds/{s}" for s in splits),
+        outs=tuple(f"results/normals/{m}/{s}" for m in methods for s in splits),
+        targets=lambda p: [normals_path(m, c) for m in methods for s in splits for c in clouds(p, s)],
     )
 
 
 def _table_step(name: str, table: Table) -> Step:
-    blocks = tuple(dict.fromkeys(METHODS[m] for m in table.methods))
+    blocks = tuple(dict.fromkeys(b for m in table.methods for b in METHODS[m]))
     return Step(
         stage=name, rule="table", smk="tables.smk", script="stages/table.py",
         modules=("tables", "metrics", *_STAGE_MODULES),
@@ -112,17 +132,44 @@ def _table_step(name: str, table: Table) -> Step:
 
 
 STEPS: dict[str, Step] = {s.stage: s for s in (
-    Step(
-        stage="test_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py", modules=_CLOUD_MODULES,
-        keys=("seed", "data", "noise.test"), deps=(), outs=("results/clouds/test",),
-        targets=lambda p: [cloud_path(c) for c in clouds(p, "test")],
-    ),
+    *(Step(
+        stage=f"{split}_clouds", rule="cloud", smk="data.smk", script="stages/cloud.py", modules=_CLOUD_MODULES,
+        keys=("seed", "data", f"noise.{split}"), deps=(), outs=(f"results/clouds/{split}",),
+        targets=lambda p, split=split: [cloud_path(c) for c in clouds(p, split)],
+    ) for split in ("train", "test")),
     _normals_step("baselines", "baseline_normals", "baselines.smk", "stages/baseline_normals.py",
                   ("baselines", "neighbors"), ("baselines",), BASELINES),
     _normals_step("mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",
-                  MFPS_MODULES, ("mfps", "seed"), ("mfps",)),
+                  MFPS_MODULES, ("mfps", "seed"), ("mfps",), ("train", "test")),
     _normals_step("simple_mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",
                   MFPS_MODULES, ("mfps", "seed"), ("simple_mfps",)),
+    Step(
+        stage="features", rule="features", smk="features.smk", script="stages/features.py",
+        modules=(*_FEATURE_MODULES, *_STAGE_MODULES), keys=("features",),
+        deps=("results/clouds/train", "results/clouds/test", "results/normals/mfps/train", "results/normals/mfps/test"),
+        outs=("results/features/train", "results/features/test"),
+        targets=lambda p: [features_path(c) for c in clouds(p)],
+    ),
+    Step(
+        stage="clusters", rule="clusters", smk="clustering.smk", script="stages/clusters.py",
+        modules=(*_FEATURE_MODULES, "clustering", *_STAGE_MODULES), keys=("clustering", "seed"),
+        deps=("results/features/train",), outs=("results/clusters",), targets=lambda p: [CLUSTER_MODEL],
+    ),
+    Step(
+        stage="train", rule="train", smk="training.smk", script="stages/train.py",
+        modules=(*_NETWORK_MODULES, "training", "metrics", *_STAGE_MODULES),
+        keys=("network", "patches", "training", "seed"),
+        deps=("results/clouds/train", "results/features/train", "results/clusters"), outs=(MODEL_DIR,),
+        targets=lambda p: [trained_marker(c) for c in range(p["clustering"]["n_clusters"])],
+    ),
+    Step(
+        stage="refine", rule="refine", smk="inference.smk", script="stages/refine.py",
+        modules=(*_NETWORK_MODULES, "inference", "training", "metrics", *_STAGE_MODULES),
+        keys=("network", "patches", "inference", "seed"),
+        deps=("results/clouds/test", "results/features/test", "results/clusters", MODEL_DIR),
+        outs=(f"results/normals/{REFINENET}/test",),
+        targets=lambda p: [normals_path(REFINENET, c) for c in clouds(p, "test")],
+    ),
     *(_table_step(name, table) for name, table in TABLES.items()),
     Step(
         stage="metrics", rule="metrics", smk="tables.smk", script="stages/merge_metrics.py",

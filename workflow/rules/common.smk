@@ -1,5 +1,6 @@
 # Shared set-up: resolved params, the run's clouds, wildcard constraints, and the DVC record hook.
 
+import json
 import os
 import sys
 
@@ -46,4 +47,5 @@ def baseline_k(w):
 
 
 TEST_SPECS = [c for c in CLOUDS.values() if c.split == "test"]
+TRAIN_SPECS = [c for c in CLOUDS.values() if c.split == "train"]
 TEST_CLOUDS = [wf.cloud_path(c) for c in TEST_SPECS]

@@ -1,0 +1,162 @@
+"""The per-cloud feature cache (ALGORITHM.md §0, stages B, C and F): filtered normals, frames and height maps.
+
+These depend only on the points and the initial normals (never on ground truth, so the same code serves test
+clouds) and cost far more than a training step's share, so they are computed once per cloud and stored. The
+point patches (stage E) are not cached: 100 points per point would dwarf the rest, and kNN queries per batch
+are cheap.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from refinenet import io
+from refinenet.atomic import atomic_path
+from refinenet.errors import InputError
+from refinenet.filtering import bilateral_filter
+from refinenet.frames import normal_frames
+from refinenet.heightmaps import height_maps
+from refinenet.neighbors import build_tree
+from refinenet.noise import bbox_diagonal
+
+FRAME_MODES = ("canonical", "faithful")
+HEIGHT_DTYPES = ("float16", "float32")
+#: Points per height-map call: the unit of the progress bar (height_maps bounds its own memory per call).
+HEIGHT_STEP = 10_000
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Everything that fixes a cloud's cached features; defaults are the code profile (ALGORITHM.md §14)."""
+
+    r_f: float = 0.03
+    """Filter ball radius as a fraction of l_d: 0.03 code profile, 0.05 paper profile (§3)."""
+    sigma_s: tuple[float, ...] = (1.0, 2.0)
+    """Spatial scales in units of R_f / 2 (outer loop of the filtered normals)."""
+    sigma_r: tuple[float, ...] = (0.1, 0.2, 0.35, 0.5)
+    """Range scales (inner loop of the filtered normals)."""
+    include_initial: bool = True
+    """Keep the initial normal as the first of the X normals: X = 9 (synthetic, PCPNet); False: X = 8 (real scans)."""
+    frame_mode: str = "canonical"
+    """Sign convention of the per-point frames (§4): canonical (det +1, recommended) or faithful (the release's)."""
+    hmp_size: int = 7
+    """m, the side of each height map."""
+    hmp_k: int = 100
+    """The height-map half-extent is the distance to the k-th nearest neighbour (code profile)."""
+    hmp_extent: float | None = None
+    """Absolute height-map half-extent as a fraction of l_d (the paper profile's ball radius, e.g. 0.05); replaces
+    hmp_k when set."""
+    heights_dtype: str = "float16"
+    """Storage type of the height maps: float16 halves the cache (heights lie within +-0.3 in units of the extent,
+    so the rounding error is at most 1.2e-4); float32 keeps them exact."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
+        object.__setattr__(self, "sigma_r", tuple(float(s) for s in self.sigma_r))
+        if not self.r_f > 0:
+            raise ValueError(f"r_f must be positive, got {self.r_f}")
+        for name in ("sigma_s", "sigma_r"):
+            values = getattr(self, name)
+            if not values or any(not s > 0 for s in values):
+                raise ValueError(f"{name} must be a non-empty sequence of positive numbers, got {values}")
+        if self.frame_mode not in FRAME_MODES:
+            raise ValueError(f"frame_mode '{self.frame_mode}' is not one of {FRAME_MODES}")
+        if self.hmp_size < 1 or self.hmp_size % 2 == 0:
+            raise ValueError(f"hmp_size must be a positive odd number (a centre bin), got {self.hmp_size}")
+        if self.hmp_k < 1:
+            raise ValueError(f"hmp_k must be at least 1, got {self.hmp_k}")
+        if self.hmp_extent is not None and not self.hmp_extent > 0:
+            raise ValueError(f"hmp_extent must be positive or None, got {self.hmp_extent}")
+        if self.heights_dtype not in HEIGHT_DTYPES:
+            raise ValueError(f"heights_dtype '{self.heights_dtype}' is not one of {HEIGHT_DTYPES}")
+
+    @property
+    def n_normals(self) -> int:
+        """X, the normals per point."""
+        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial)
+
+
+@dataclass(frozen=True)
+class Features:
+    """One cloud's cached features, row i belonging to point i."""
+
+    nf: np.ndarray
+    """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them."""
+    frames: np.ndarray
+    """(N, 3, 3) float32: columns [e1 e2 e3] of the normal-tensor frame (§4)."""
+    heights: np.ndarray
+    """(N, X, m, m) float16 or float32: one height map per normal of nf, in nf's order."""
+    n_normals: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        n, width = self.nf.shape
+        object.__setattr__(self, "n_normals", width // 3)
+        if width % 3 or self.frames.shape != (n, 3, 3) or self.heights.shape[:2] != (n, width // 3):
+            raise ValueError(f"inconsistent feature shapes: nf {self.nf.shape}, frames {self.frames.shape}, "
+                             f"heights {self.heights.shape}")
+
+    def __len__(self) -> int:
+        return len(self.nf)
+
+    @property
+    def n_first(self) -> np.ndarray:
+        """(N, 3) the first normal of nf: the initial normal when X = 9; the sign reference of frames and targets."""
+        return self.nf[:, :3]
+
+
+def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig = FeatureConfig(),
+                     progress: bool = False) -> Features:
+    """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part)."""
+    points = np.asarray(points, dtype=np.float64)
+    nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
+                          sigma_r=config.sigma_r, include_initial=config.include_initial)
+    frames = normal_frames(nf, config.frame_mode)
+    tree = build_tree(points)
+    extent = None if config.hmp_extent is None else config.hmp_extent * bbox_diagonal(points)
+    heights = np.empty((len(points), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
+    for start in tqdm(range(0, len(points), HEIGHT_STEP), desc="height maps", disable=not progress):
+        index = np.arange(start, min(start + HEIGHT_STEP, len(points)))
+        heights[index] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
+                                     tree=tree, index=index)
+    return Features(nf=nf, frames=frames.astype(np.float32), heights=heights)
+
+
+def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
+    """Write an uncompressed .npz atomically; `meta` (JSON-serialisable, e.g. the FeatureConfig) is stored with it."""
+    with atomic_path(path) as tmp:
+        np.savez(tmp, nf=features.nf, frames=features.frames, heights=features.heights,
+                 meta=np.asarray(json.dumps(meta, sort_keys=True)))
+
+
+def load_features(path: str | Path) -> tuple[Features, dict[str, Any]]:
+    """The features and meta written by `save_features`; InputError for a missing or malformed file."""
+    path = Path(path)
+    try:
+        data = np.load(path)
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise ValueError("not an .npz archive")
+        with data:
+            arrays = {key: data[key] for key in ("nf", "frames", "heights", "meta")}
+    except (OSError, ValueError, KeyError) as err:
+        raise InputError(path, f"not a feature cache ({err})") from None
+    try:
+        features = Features(nf=arrays["nf"], frames=arrays["frames"], heights=arrays["heights"])
+    except ValueError as err:
+        raise InputError(path, str(err)) from None
+    return features, json.loads(str(arrays["meta"]))
+
+
+
+def load_for_cloud(cloud_path: str | Path, features_path: str | Path) -> tuple[io.Cloud, Features]:
+    """A cloud record and its feature cache, checked to describe the same points."""
+    cloud = io.read_cloud(cloud_path)
+    features, _ = load_features(features_path)
+    if len(features) != len(cloud):
+        raise InputError(features_path, f"{len(features)} feature rows for {len(cloud)} points of {cloud_path}")
+    return cloud, features

@@ -1,0 +1,130 @@
+"""Batched network inputs from cached clouds: shapes, the target sign rule, the stratified hold-out, caps, batching."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_features import noisy_cube
+
+from refinenet.dataset import Cloud, ClusterData, PatchConfig, holdout_mask, make_inputs
+from refinenet.features import FeatureConfig, compute_features
+from refinenet.frames import to_local
+from refinenet.model import preset
+
+FULL = preset("release")
+
+
+def cube_cloud(n: int, seed: int, n_clusters: int = 3, with_truth: bool = True) -> Cloud:
+    """A noisy cube with cached features and arbitrary cluster ids (by face pair)."""
+    points, normals, initial = noisy_cube(n, seed)
+    features = compute_features(points, initial, FeatureConfig())
+    clusters = np.abs(normals).argmax(axis=1) % n_clusters
+    return Cloud(points, features, clusters, normals if with_truth else None)
+
+
+@pytest.fixture(scope="module")
+def clouds() -> list[Cloud]:
+    return [cube_cloud(1200, seed=0), cube_cloud(900, seed=1)]
+
+
+def test_batch_shapes_and_local_frame(clouds):
+    cloud = clouds[0]
+    index = np.arange(0, 1200, 7)
+    inputs = make_inputs(cloud, index, PatchConfig(), FULL, np.random.default_rng(0))
+    b = len(index)
+    assert inputs.normals.shape == (b, 27) and inputs.normals.dtype == np.float32
+    assert inputs.points.shape == (b, 100, 3) and inputs.points.dtype == np.float32
+    assert inputs.heights.shape == (b, 9, 7, 7) and inputs.heights.dtype == np.float32
+    assert inputs.target.shape == (b, 3) and inputs.target.dtype == np.float32
+    frames = cloud.features.frames[index]
+    np.testing.assert_allclose(inputs.normals[:, :3], to_local(frames, cloud.features.nf[index, :3]), atol=1e-6)
+    assert (inputs.normals[:, 2] > 0).all()  # e3 . n_first > 0 (§4)
+    np.testing.assert_array_equal(inputs.points[:, 0], 0.0)  # the point itself, centred
+    assert np.linalg.norm(inputs.points, axis=2).max() <= 1.0 + 1e-5  # scaled by the 100th neighbour
+    normals, points, heights = inputs.tensors("cpu")
+    assert normals.shape == (b, 27) and points.shape == (b, 100, 3) and heights.shape == (b, 9, 7, 7)
+
+
+def test_target_sign_rule_gives_positive_z(clouds):
+    """The initial normals are the ground truth up to sign: flipped onto n_first, the target is n_first itself, so
+    its local z is n_first . e3 > 0."""
+    cloud = clouds[0]
+    index = np.arange(1200)
+    target = make_inputs(cloud, index, PatchConfig(), preset("release", features="normals"),
+                         np.random.default_rng(0)).target
+    assert (target[:, 2] > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(target, axis=1), 1.0, atol=1e-6)
+
+
+def test_unused_inputs_are_not_built(clouds):
+    inputs = make_inputs(clouds[0], np.arange(5), PatchConfig(), preset("release", features="normals"),
+                         np.random.default_rng(0))
+    assert inputs.points is None and inputs.heights is None
+    test_cloud = Cloud(clouds[0].points, clouds[0].features, clouds[0].clusters)
+    assert make_inputs(test_cloud, np.arange(5), PatchConfig(), FULL, np.random.default_rng(0)).target is None
+
+
+def test_ball_patches_have_max_points(clouds):
+    patch = PatchConfig(mode="ball", radius=0.05, max_points=64)
+    inputs = make_inputs(clouds[0], np.arange(10), patch, FULL, np.random.default_rng(0))
+    assert inputs.points.shape == (10, 64, 3)
+
+
+def test_holdout_mask_is_stratified_and_seeded():
+    clusters = np.repeat([0, 1, 2, 3], [1000, 37, 5, 1])
+    mask = holdout_mask(clusters, 0.2, np.random.default_rng(0))
+    assert [int(mask[clusters == c].sum()) for c in range(4)] == [200, 7, 1, 0]
+    np.testing.assert_array_equal(mask, holdout_mask(clusters, 0.2, np.random.default_rng(0)))
+    assert not np.array_equal(mask, holdout_mask(clusters, 0.2, np.random.default_rng(1)))
+
+
+def test_split_is_disjoint_complete_and_shared_by_all_clusters(clouds):
+    per_cluster = [ClusterData(clouds, c, seed=5) for c in range(3)]
+    for i, cloud in enumerate(clouds):
+        val = np.zeros(len(cloud.points), dtype=bool)
+        train = np.zeros(len(cloud.points), dtype=bool)
+        for c, data in enumerate(per_cluster):
+            v = data.val.point[data.val.cloud == i]
+            t = data.train.point[data.train.cloud == i]
+            assert (cloud.clusters[v] == c).all() and (cloud.clusters[t] == c).all()
+            assert len(v) == round(0.2 * (cloud.clusters == c).sum())
+            val[v], train[t] = True, True
+        assert not (val & train).any() and (val | train).all()
+        np.testing.assert_array_equal(val, holdout_mask(cloud.clusters, 0.2, np.random.default_rng([5, i])))
+
+
+def test_cap_is_drawn_once(clouds):
+    capped = ClusterData(clouds, 0, seed=1, max_train_points_per_cloud=40)
+    again = ClusterData(clouds, 0, seed=1, max_train_points_per_cloud=40)
+    for i in range(2):
+        assert (capped.train.cloud == i).sum() == 40 and (capped.val.cloud == i).sum() == 10
+    np.testing.assert_array_equal(capped.train.point, again.train.point)
+    np.testing.assert_array_equal(capped.val.point, again.val.point)
+
+
+def test_batches(clouds):
+    data = ClusterData(clouds, 1, seed=0)
+    n = len(data.train)
+    sizes = [len(b) for b in data.batches(data.train, 64, FULL, np.random.default_rng(0), shuffle=True,
+                                          drop_last=True)]
+    assert sizes == [64] * (n // 64)
+    sizes = [len(b) for b in data.batches(data.train, 64, FULL, np.random.default_rng(0), shuffle=True,
+                                          drop_last=False)]
+    assert sum(sizes) == n and sizes[-1] == n - 64 * (n // 64)
+    # One batch over both clouds = each cloud's inputs, grouped by cloud.
+    (whole,) = data.batches(data.val, len(data.val), FULL, np.random.default_rng(0), shuffle=False, drop_last=False)
+    parts = [make_inputs(clouds[i], data.val.point[data.val.cloud == i], PatchConfig(), FULL,
+                         np.random.default_rng(0)) for i in range(2)]
+    for name in ("normals", "points", "heights", "target"):
+        np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(p, name) for p in parts]))
+
+
+def test_errors(clouds):
+    with pytest.raises(ValueError, match="ground-truth"):
+        ClusterData([Cloud(clouds[0].points, clouds[0].features, clouds[0].clusters)], 0)
+    with pytest.raises(ValueError, match="val_fraction"):
+        ClusterData(clouds, 0, val_fraction=1.0)
+    with pytest.raises(ValueError, match="inconsistent"):
+        Cloud(clouds[0].points[:10], clouds[0].features, clouds[0].clusters)
+    with pytest.raises(ValueError, match="mode"):
+        PatchConfig(mode="grid")

@@ -1,0 +1,91 @@
+"""The per-cloud feature cache: shapes and types for X = 9 and 8, the options, and the .npz round trip.
+
+`noisy_cube` is shared with the clustering, dataset, training and inference tests.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import refinenet.features as features_module
+from refinenet.errors import InputError
+from refinenet.features import FeatureConfig, compute_features, load_features, save_features
+from refinenet.heightmaps import height_maps
+from refinenet.noise import bbox_diagonal
+
+
+def noisy_cube(n: int, seed: int = 0, noise: float = 0.003) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points on the unit cube's surface with Gaussian noise (sigma = noise * l_d), their exact face normals, and
+    initial normals equal to them up to a random sign per point (the sign is all MFPS cannot know)."""
+    rng = np.random.default_rng(seed)
+    face = rng.integers(6, size=n)
+    axis, side = face % 3, (face // 3).astype(float)
+    points = rng.random((n, 3))
+    points[np.arange(n), axis] = side
+    normals = np.zeros((n, 3))
+    normals[np.arange(n), axis] = 2 * side - 1
+    points += rng.normal(0.0, noise * np.sqrt(3.0), points.shape)
+    initial = normals * rng.choice([-1.0, 1.0], size=(n, 1))
+    return points, normals, initial
+
+
+@pytest.fixture(scope="module")
+def cube() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    return noisy_cube(1500)
+
+
+@pytest.mark.parametrize("include_initial, x", [(True, 9), (False, 8)])
+def test_shapes_and_types(cube, include_initial, x):
+    points, _, initial = cube
+    config = FeatureConfig(include_initial=include_initial)
+    features = compute_features(points, initial, config)
+    n = len(points)
+    assert config.n_normals == features.n_normals == x
+    assert features.nf.shape == (n, 3 * x) and features.nf.dtype == np.float32
+    assert features.frames.shape == (n, 3, 3) and features.frames.dtype == np.float32
+    assert features.heights.shape == (n, x, 7, 7) and features.heights.dtype == np.float16
+    np.testing.assert_allclose(np.linalg.det(features.frames), 1.0, atol=1e-5)  # canonical frames
+    if include_initial:
+        np.testing.assert_array_equal(features.n_first, initial.astype(np.float32))
+
+
+def test_height_chunks_and_extent_match_one_direct_call(cube, monkeypatch):
+    """Heights computed in progress-bar chunks equal one height_maps call; hmp_extent is a fraction of l_d."""
+    points, _, initial = cube
+    monkeypatch.setattr(features_module, "HEIGHT_STEP", 400)
+    config = FeatureConfig(hmp_extent=0.05, heights_dtype="float32", hmp_size=5)
+    features = compute_features(points, initial, config, progress=True)
+    direct = height_maps(points, features.nf, features.frames.astype(np.float64), m=5,
+                         extent=0.05 * bbox_diagonal(points))
+    assert features.heights.dtype == np.float32 and features.heights.shape[2:] == (5, 5)
+    np.testing.assert_allclose(features.heights, direct, atol=1e-5)
+
+
+def test_round_trip(tmp_path, cube):
+    points, _, initial = cube
+    features = compute_features(points[:300], initial[:300], FeatureConfig(hmp_k=20))
+    path = tmp_path / "cloud.features.npz"
+    save_features(path, features, {"r_f": 0.03, "shape": "cube"})
+    loaded, meta = load_features(path)
+    assert meta == {"r_f": 0.03, "shape": "cube"}
+    for name in ("nf", "frames", "heights"):
+        np.testing.assert_array_equal(getattr(loaded, name), getattr(features, name))
+        assert getattr(loaded, name).dtype == getattr(features, name).dtype
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left behind
+
+
+def test_bad_cache_file_is_an_input_error(tmp_path):
+    path = tmp_path / "broken.npz"
+    np.savez(path, nf=np.zeros((4, 27), np.float32))
+    with pytest.raises(InputError, match="broken.npz"):
+        load_features(path)
+    with pytest.raises(InputError, match="missing.npz"):
+        load_features(tmp_path / "missing.npz")
+
+
+@pytest.mark.parametrize("field, value", [("frame_mode", "random"), ("hmp_size", 6), ("r_f", 0.0),
+                                          ("sigma_r", ()), ("heights_dtype", "int8"), ("hmp_extent", -1.0)])
+def test_config_errors_name_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        FeatureConfig(**{field: value})

@@ -1,0 +1,202 @@
+"""The network of ALGORITHM.md §8: exact parameter counts, layer shapes, variants, connection algebra."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from refinenet.model import (
+    CONNECTIONS,
+    FEATURES,
+    NetworkConfig,
+    RefineNet,
+    RotationMatrix,
+    TransformationMatrix,
+    architecture_table,
+    count_parameters,
+    example_inputs,
+    fuse_batch_norm,
+    preset,
+    quaternion_to_matrix,
+)
+
+VARIANTS = [(f, c) for f in FEATURES for c in CONNECTIONS if f != "normals" or c == "weight"]
+
+
+def _inputs(config: NetworkConfig, batch_size: int = 4, seed: int = 0):
+    return example_inputs(config, batch_size, torch.Generator().manual_seed(seed))
+
+
+@pytest.mark.parametrize(("config", "expected"), [
+    # The §8 table ([C]'s architecture).
+    (NetworkConfig(), 2_648_131),
+    (NetworkConfig(features="normals_points"), 1_231_107),
+    (NetworkConfig(n_normals=8), 2_593_475),
+    (NetworkConfig(features="normals_hmps", hmp_architecture="refinenet"), 1_137_219),  # [C]'s normals&HMPs
+    (preset("paper"), 2_804_163),
+    # Derived by hand from the layer lists of §8.
+    (NetworkConfig(features="normals_hmps"), 2_293_571),  # right column: HMP 558,784 conv + 1,362,368 FC
+    (NetworkConfig(features="normals"), 41_273),  # BN(27) + 27-256-128-3 with BN
+    (NetworkConfig(connection="rot"), 1_954_557),  # point out 4, HMP out 64x3, branches of 3 + 64 + 64
+])
+def test_parameter_counts_match_the_spec(config: NetworkConfig, expected: int):
+    assert count_parameters(RefineNet(config)) == expected
+
+
+def test_parameter_count_per_module_of_the_full_network():
+    model = RefineNet(NetworkConfig())
+    assert count_parameters(model.point_module) == 858_688
+    assert count_parameters(model.height_map_module) == 1_268_416
+    assert count_parameters(model.connections) == 40_896
+    assert count_parameters(model.output_module) == 480_131
+    assert count_parameters(model.connections[0]) == 40_896 // 9
+
+
+def test_presets():
+    assert preset("release") == NetworkConfig()
+    paper = preset("paper", n_normals=8)
+    assert (paper.point_fc, paper.output_fc) == ((256, 128), (512, 256))
+    assert (paper.n_normals, paper.n_patch_points) == (8, 300)
+    with pytest.raises(ValueError, match="preset"):
+        preset("tensorflow")
+
+
+@pytest.mark.parametrize("bad", [
+    {"features": "points"}, {"connection": "add"}, {"features": "normals", "connection": "rot"},
+    {"n_normals": 0}, {"point_fc": ()}, {"output_fc": (256, 0)}, {"dropout": 1.0}, {"dropout": -0.1},
+    {"hmp_size": 4}, {"n_patch_points": 0}, {"hmp_architecture": "left"},
+])
+def test_invalid_configs_are_refused(bad: dict):
+    with pytest.raises(ValueError):
+        NetworkConfig(**bad)
+
+
+def test_sizes_from_yaml_lists_become_tuples():
+    assert NetworkConfig(point_fc=[256, 128]).point_fc == (256, 128)
+
+
+def _hmp_rows(config: NetworkConfig) -> list[tuple[str, tuple[int, ...]]]:
+    return [(row["type"], row["output_shape"]) for row in architecture_table(config)
+            if row["layer"].startswith("height_map_module")
+            and row["type"] in ("Conv2d", "MaxPool2d", "Linear")]
+
+
+def test_architecture_table_reproduces_both_columns_of_the_paper_table():
+    conv, pool, fc = "Conv2d", "MaxPool2d", "Linear"
+    assert _hmp_rows(NetworkConfig()) == [
+        (conv, (64, 7, 7)), (conv, (64, 7, 7)), (pool, (64, 5, 5)), (conv, (128, 5, 5)), (conv, (128, 5, 5)),
+        (pool, (128, 3, 3)), (conv, (128, 3, 3)), (fc, (256,)), (fc, (128,)), (fc, (64 * 64,))]
+    assert _hmp_rows(NetworkConfig(features="normals_hmps")) == [
+        (conv, (64, 7, 7)), (conv, (64, 7, 7)), (pool, (64, 5, 5)), (conv, (128, 5, 5)), (conv, (128, 5, 5)),
+        (pool, (128, 3, 3)), (conv, (256, 3, 3)), (fc, (512,)), (fc, (256,)), (fc, (64 * 3,))]
+
+
+@pytest.mark.parametrize("config", [NetworkConfig(), preset("paper"), NetworkConfig(connection="concat")])
+def test_architecture_table_accounts_for_every_parameter(config: NetworkConfig):
+    rows = architecture_table(config)
+    assert sum(row["params"] for row in rows) == count_parameters(RefineNet(config))
+    assert {"layer", "type", "detail", "output_shape", "params"} <= set(rows[0])
+    assert rows[-1]["output_shape"] == (3,)
+    input_bn = next(row for row in rows if row["layer"] == "output_module.0")
+    assert (input_bn["type"], input_bn["output_shape"]) == ("BatchNorm1d", (9 * 192,))
+
+
+@pytest.mark.parametrize(("features", "connection"), VARIANTS)
+def test_every_variant_trains_and_outputs_unit_normals(features: str, connection: str):
+    torch.manual_seed(0)
+    model = RefineNet(NetworkConfig(features=features, connection=connection))
+    out = model(*_inputs(model.config))
+    assert out.shape == (4, 3)
+    torch.testing.assert_close(out.norm(dim=1), torch.ones(4))
+    out[:, 2].sum().backward()
+    missing = [name for name, p in model.named_parameters() if p.grad is None]
+    assert not missing
+
+
+@pytest.mark.parametrize("connection", ["concat", "residual"])
+def test_ablation_branches_keep_refinenet_sizes(connection: str):
+    model = RefineNet(NetworkConfig(connection=connection))
+    assert model.connections[0].out_dim == 3 * 64
+
+
+def test_eval_mode_is_deterministic_and_per_sample():
+    torch.manual_seed(0)
+    model = RefineNet(NetworkConfig())
+    model(*_inputs(model.config, 8, seed=1))  # one training step's worth of BN statistics
+    model.eval()
+    normals, points, heights = _inputs(model.config, 5)
+    with torch.no_grad():
+        first, second = model(normals, points, heights), model(normals, points, heights)
+        single = model(normals[:1], points[:1], heights[:1])
+    assert torch.equal(first, second)
+    torch.testing.assert_close(single, first[:1])
+
+
+def test_fused_copy_for_inference_gives_the_same_normals():
+    torch.manual_seed(0)
+    model = RefineNet(NetworkConfig())
+    for seed in range(3):  # non-trivial BN statistics
+        model(*_inputs(model.config, 16, seed=seed))
+    model.eval()
+    fused = fuse_batch_norm(model)
+    assert not any(isinstance(m, torch.nn.BatchNorm1d) for m in fused.point_module.modules())
+    remaining = [m for m in fused.modules() if isinstance(m, torch.nn.BatchNorm1d)]
+    assert remaining == [fused.output_module[0]]  # the input BN precedes, not follows, its Linear
+    inputs = _inputs(model.config, 5)
+    with torch.no_grad():
+        torch.testing.assert_close(fused(*inputs), model(*inputs), rtol=0, atol=1e-5)
+    assert count_parameters(model) == 2_648_131  # the original is left as it was
+
+
+def test_weight_matrix_connection_computes_th_tp_v():
+    torch.manual_seed(0)
+    model = RefineNet(NetworkConfig()).eval()
+    normals, points, heights = _inputs(model.config, 3)
+    branch = 4
+    captured = {}
+    hook = model.connections[branch].register_forward_hook(lambda m, args, out: captured.setdefault("y", out))
+    with torch.no_grad():
+        model(normals, points, heights)
+        hook.remove()
+        t_p = model.point_module(points).view(3, 64, 3)  # row-major 64 x 3
+        t_h = model.height_map_module(heights).view(3, 64, 64)
+        v = normals.view(3, 9, 3)[:, branch]
+        y1 = torch.einsum("bij,bj->bi", t_p, v)
+        y2 = torch.einsum("bij,bj->bi", t_h, y1)
+        z = model.connections[branch].normal_fc(v)
+    torch.testing.assert_close(captured["y"], torch.cat([y1, y2, z], dim=1))
+
+
+def test_rotation_connection_starts_at_identity_and_stays_a_rotation():
+    v = torch.nn.functional.normalize(torch.randn(6, 3), dim=1)
+    torch.testing.assert_close(RotationMatrix()(v, torch.zeros(6, 4)), v)
+    torch.testing.assert_close(TransformationMatrix()(v, torch.zeros(6, 9)), v)
+    r = quaternion_to_matrix(torch.randn(6, 4))
+    torch.testing.assert_close(r @ r.transpose(1, 2), torch.eye(3).expand(6, 3, 3))
+    torch.testing.assert_close(torch.linalg.det(r), torch.ones(6))
+    half_turn_about_z = quaternion_to_matrix(torch.tensor([[0.0, 0.0, 0.0, 2.0]]))
+    torch.testing.assert_close(half_turn_about_z[0], torch.diag(torch.tensor([-1.0, -1.0, 1.0])))
+
+
+def test_missing_or_misshapen_inputs_are_named():
+    model = RefineNet(NetworkConfig())
+    normals, points, heights = _inputs(model.config)
+    with pytest.raises(ValueError, match="normals"):
+        model(normals[:, :24], points, heights)
+    with pytest.raises(ValueError, match="points"):
+        model(normals, None, heights)
+    with pytest.raises(ValueError, match="heights"):
+        model(normals, points, heights[:, :8])
+    normals_only = RefineNet(NetworkConfig(features="normals")).eval()
+    assert normals_only(normals).shape == (4, 3)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_runs_on_cuda_under_no_grad():
+    model = RefineNet(NetworkConfig()).eval().cuda()
+    inputs = example_inputs(model.config, 2, device="cuda")
+    with torch.no_grad():
+        out = model(*inputs)
+    assert out.device.type == "cuda"
+    reference = model.cpu()(*(t.cpu() for t in inputs))
+    torch.testing.assert_close(out.cpu(), reference, rtol=0, atol=5e-3)  # cuDNN convolutions may use TF32

@@ -1,0 +1,123 @@
+"""Training one cluster (ALGORITHM.md §9): learning, bit-identical resumption after a kill, history, early stopping,
+empty clusters and the settings check on resumption."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from test_dataset import cube_cloud
+
+import refinenet.training as training
+from refinenet.dataset import PatchConfig
+from refinenet.model import preset
+from refinenet.training import (
+    BEST,
+    CHECKPOINT,
+    EMPTY,
+    HISTORY,
+    HISTORY_COLUMNS,
+    TrainConfig,
+    cluster_data,
+    train_cluster,
+)
+
+NORMALS_ONLY = preset("release", features="normals")
+
+
+@pytest.fixture(scope="module")
+def clouds():
+    return [cube_cloud(800, seed=2, n_clusters=1), cube_cloud(600, seed=3, n_clusters=1)]
+
+
+def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
+    """The target is the first local normal up to noise-free sign: a small network learns it within 3 epochs."""
+    config = TrainConfig(optimizer="adam", lr=1e-3, batch_size=64, max_epochs=3, seed=1, threads=1)
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False)
+    history = pd.read_csv(tmp_path / HISTORY)
+    assert list(history.columns) == list(HISTORY_COLUMNS)
+    assert history["epoch"].tolist() == [1, 2, 3]
+    assert history["train_loss"].iloc[-1] < 0.5 * history["train_loss"].iloc[0]
+    assert np.isfinite(history.to_numpy()).all() and (history["val_rmse_deg"] >= history["val_mean_deg"]).all()
+    assert result.epochs == 3 and not result.stopped_early and not result.empty
+    assert result.best_val_rmse_deg == history["val_rmse_deg"].min()
+    assert torch.load(tmp_path / BEST, weights_only=True)["epoch"] == result.best_epoch
+
+
+def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
+    """The full network (dropout, BN, patches, heights) for 3 epochs, against 2 epochs, a kill inside epoch 3 (after
+    its optimiser steps), and a resumption."""
+    config = TrainConfig(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1)
+    full = preset("release")
+    data = cluster_data(clouds[1:], 0, config, PatchConfig())
+    train_cluster(config, full, data, tmp_path / "straight", progress=False)
+
+    validate, calls = training._validate, []
+
+    def killed_in_epoch_3(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return validate(*args, **kwargs)
+
+    monkeypatch.setattr(training, "_validate", killed_in_epoch_3)
+    with pytest.raises(KeyboardInterrupt):
+        train_cluster(config, full, data, tmp_path / "resumed", progress=False)
+    assert len(pd.read_csv(tmp_path / "resumed" / HISTORY)) == 2
+    monkeypatch.setattr(training, "_validate", validate)
+    result = train_cluster(config, full, data, tmp_path / "resumed", progress=False)
+    assert result.epochs == 3
+
+    straight = torch.load(tmp_path / "straight" / CHECKPOINT, weights_only=True)
+    resumed = torch.load(tmp_path / "resumed" / CHECKPOINT, weights_only=True)
+    assert straight["model"].keys() == resumed["model"].keys()
+    for key, value in straight["model"].items():
+        assert torch.equal(value, resumed["model"][key]), key
+    for key, value in straight["optimizer"]["state"].items():
+        assert torch.equal(value["momentum_buffer"], resumed["optimizer"]["state"][key]["momentum_buffer"])
+    drop_seconds = [{k: v for k, v in row.items() if k != "seconds"} for row in straight["history"]]
+    assert drop_seconds == [{k: v for k, v in row.items() if k != "seconds"} for row in resumed["history"]]
+    assert pd.read_csv(tmp_path / "resumed" / HISTORY)["epoch"].tolist() == [1, 2, 3]
+
+
+def test_early_stopping(tmp_path, clouds, monkeypatch):
+    monkeypatch.setattr(training, "_validate", lambda *args, **kwargs: np.full(10, 3.0))
+    config = TrainConfig(batch_size=128, max_epochs=50, patience=2, threads=1)
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False)
+    assert (result.epochs, result.best_epoch, result.stopped_early) == (3, 1, True)
+    # A finished run resumes to the same result without training.
+    assert train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False) \
+        == result
+
+
+def test_empty_cluster_writes_a_marker(tmp_path, clouds):
+    config = TrainConfig()
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 3, config, PatchConfig()), tmp_path, False)
+    assert result.empty and result.epochs == 0
+    assert json.loads((tmp_path / EMPTY).read_text()) == {"cluster": 3, "train_points": 0, "val_points": 0}
+    assert not (tmp_path / BEST).exists()
+
+
+def test_other_settings_start_over(tmp_path, clouds):
+    """A checkpoint of other settings is not resumed: training restarts from epoch 1, as a fresh run would."""
+    config = TrainConfig(batch_size=128, max_epochs=1, threads=1)
+    train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False,
+                  checkpoint_dir=tmp_path / "ckpt")
+    assert (tmp_path / "ckpt" / "checkpoint.pt").exists() and not (tmp_path / "checkpoint.pt").exists()
+    changed = TrainConfig(batch_size=128, max_epochs=2, lr=1e-3, threads=1)
+    resumed = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, PatchConfig()),
+                            tmp_path, False, checkpoint_dir=tmp_path / "ckpt")
+    fresh = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, PatchConfig()),
+                          tmp_path / "fresh", False)
+    assert resumed.epochs == fresh.epochs == 2
+    assert resumed.best_val_rmse_deg == fresh.best_val_rmse_deg
+
+
+@pytest.mark.parametrize("field, value", [("optimizer", "rmsprop"), ("loss", "cos"), ("device", "tpu"), ("lr", 0.0),
+                                          ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0)])
+def test_config_errors_name_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        TrainConfig(**{field: value})
