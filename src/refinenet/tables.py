@@ -108,9 +108,10 @@ def caption(title: str, params: dict, methods: Sequence[str]) -> str:
                      f"theta_t = {m['theta_t']} deg, |A| <= {m['a_max']}, eta = {m['eta']}.")
     if "refinenet" in methods:
         f, n, t, pa = params["features"], params["network"], params["training"], params["patches"]
+        n_normals = len(f["sigma_s"]) * len(f["sigma_r"]) + f["include_initial"]
         parts.append(
             f"Refine-Net: {n['preset']} network, features {n['features']}, connection {n['connection']}, "
-            f"Kc = {params['clustering']['n_clusters']}, X = {len(f['sigma_s']) * len(f['sigma_r']) + f['include_initial']}"
+            f"Kc = {params['clustering']['n_clusters']}, X = {n_normals}"
             f", r_f = {f['r_f']}, {f['frame_mode']} frames, {pa['mode']} patches; {t['optimizer']} lr {t['lr']}, "
             f"batch {t['batch_size']}, <= {t['max_epochs']} epochs (patience {t['patience']}), {t['loss']} loss"
             + (f", at most {t['max_train_points_per_cloud']} training points per cloud"
