@@ -71,7 +71,7 @@ def snakemake_changed_rules(repo: Path) -> set[str]:
 
 def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
     table = pd.read_csv(by_snakemake / TABLE, index_col=0)
-    assert list(table.index) == ["PCA", "Jet", "MFPS", "simple MFPS"] and "Average/mean" in table.columns
+    assert list(table.index) == ["PCA", "Jet", "MFPS", "simple MFPS", "Refine-Net"] and "Average/mean" in table.columns
     # MFPS is built for sharp features: it must beat both baselines there (ALGORITHM.md §2).
     assert table.loc["MFPS", "SharpFeature/mean"] < min(table.loc["PCA", "SharpFeature/mean"],
                                                          table.loc["Jet", "SharpFeature/mean"])
@@ -97,8 +97,11 @@ TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
         ("  jet_k: 100", "  jet_k: 90", {"baselines"} | TABLES),
         ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps", "table_synthetic", "table_synthetic_pgp"}),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES),
-        ("seed: 2022", "seed: 7", {"test_clouds", "mfps", "simple_mfps"}),
-        ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}", {"test_clouds"} | TABLES),
+        ("seed: 2022", "seed: 7", {"train_clouds", "test_clouds", "mfps", "simple_mfps", "clusters", "train", "refine"}),
+        ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}",
+         {"train_clouds", "test_clouds"} | TABLES),
+        ("  hmp_k: 100", "  hmp_k: 90", {"features", "table_synthetic", "table_synthetic_pgp"}),
+        ("  n_clusters: 4", "  n_clusters: 3", {"clusters", "table_synthetic", "table_synthetic_pgp"}),
     ],
 )
 def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, new, steps):

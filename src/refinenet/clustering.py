@@ -7,16 +7,15 @@ gets its own network, so each network sees a narrower input distribution. The fe
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from refinenet.atomic import atomic_path
 from refinenet.errors import InputError
 from refinenet.frames import to_local
+from refinenet.io import load_record, save_record
 
 #: PCA components kept (§5).
 N_COMPONENTS = 3
@@ -150,21 +149,14 @@ def _sq_distances(x: np.ndarray, centres: np.ndarray) -> np.ndarray:
 
 def save_cluster_model(path: str | Path, model: ClusterModel, meta: dict[str, Any]) -> None:
     """Write the model as .npz atomically, with `meta` (JSON-serialisable: seed, Kc, feature config...)."""
-    with atomic_path(path) as tmp:
-        np.savez(tmp, mean=model.mean, components=model.components, centres=model.centres,
-                 meta=np.asarray(json.dumps(meta, sort_keys=True)))
+    save_record(path, {"mean": model.mean, "components": model.components, "centres": model.centres}, meta)
 
 
 def load_cluster_model(path: str | Path) -> tuple[ClusterModel, dict[str, Any]]:
     """The model and meta written by `save_cluster_model`; InputError for a missing or malformed file."""
-    path = Path(path)
+    arrays, meta = load_record(path, ("mean", "components", "centres"), "cluster model")
     try:
-        data = np.load(path)
-        if not isinstance(data, np.lib.npyio.NpzFile):
-            raise ValueError("not an .npz archive")
-        with data:
-            arrays = {key: data[key] for key in ("mean", "components", "centres", "meta")}
         model = ClusterModel(mean=arrays["mean"], components=arrays["components"], centres=arrays["centres"])
-    except (OSError, ValueError, KeyError) as err:
+    except ValueError as err:
         raise InputError(path, f"not a cluster model ({err})") from None
-    return model, json.loads(str(arrays["meta"]))
+    return model, meta

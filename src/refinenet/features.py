@@ -8,7 +8,6 @@ are cheap.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -17,7 +16,6 @@ import numpy as np
 from tqdm import tqdm
 
 from refinenet import io
-from refinenet.atomic import atomic_path
 from refinenet.errors import InputError
 from refinenet.filtering import bilateral_filter
 from refinenet.frames import normal_frames
@@ -129,28 +127,17 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
     """Write an uncompressed .npz atomically; `meta` (JSON-serialisable, e.g. the FeatureConfig) is stored with it."""
-    with atomic_path(path) as tmp:
-        np.savez(tmp, nf=features.nf, frames=features.frames, heights=features.heights,
-                 meta=np.asarray(json.dumps(meta, sort_keys=True)))
+    io.save_record(path, {"nf": features.nf, "frames": features.frames, "heights": features.heights}, meta)
 
 
 def load_features(path: str | Path) -> tuple[Features, dict[str, Any]]:
     """The features and meta written by `save_features`; InputError for a missing or malformed file."""
-    path = Path(path)
-    try:
-        data = np.load(path)
-        if not isinstance(data, np.lib.npyio.NpzFile):
-            raise ValueError("not an .npz archive")
-        with data:
-            arrays = {key: data[key] for key in ("nf", "frames", "heights", "meta")}
-    except (OSError, ValueError, KeyError) as err:
-        raise InputError(path, f"not a feature cache ({err})") from None
+    arrays, meta = io.load_record(path, ("nf", "frames", "heights"), "feature cache")
     try:
         features = Features(nf=arrays["nf"], frames=arrays["frames"], heights=arrays["heights"])
     except ValueError as err:
         raise InputError(path, str(err)) from None
-    return features, json.loads(str(arrays["meta"]))
-
+    return features, meta
 
 
 def load_for_cloud(cloud_path: str | Path, features_path: str | Path) -> tuple[io.Cloud, Features]:

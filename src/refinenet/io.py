@@ -110,15 +110,36 @@ def read_cloud(path: str | Path, min_points: int = 1) -> Cloud:
     return Cloud(points, normals, meta)
 
 
-def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
+def save_record(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
+    """An uncompressed `.npz` of named arrays plus JSON metadata (seeds, settings), written atomically: the
+    pipeline's format for clouds, feature caches and cluster models."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, **arrays, meta=np.asarray(json.dumps(meta, sort_keys=True)))
+
+
+def load_record(path: str | Path, required: tuple[str, ...], what: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The arrays and metadata of a `save_record` file; every array in `required` must be there and all arrays
+    present are returned. A missing or malformed file is an InputError naming `what` it should have been."""
+    path = Path(path)
     try:
-        with np.load(path, allow_pickle=False) as data:
-            points = data["points"].astype(np.float64)
-            normals = data["normals"].astype(np.float64) if "normals" in data else None
+        data = np.load(path, allow_pickle=False)
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise ValueError("not an .npz archive")
+        with data:
+            missing = [key for key in required if key not in data]
+            if missing:
+                raise KeyError(f"no {', '.join(missing)}")
+            arrays = {key: data[key] for key in data.files if key != "meta"}
             meta = json.loads(str(data["meta"])) if "meta" in data else {}
     except (ValueError, OSError, EOFError, KeyError) as err:
-        raise InputError(path, f"unreadable cloud record ({err})") from None
-    return points, normals, meta
+        raise InputError(path, f"not a {what} ({err})") from None
+    return arrays, meta
+
+
+def _read_npz(path: Path) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
+    arrays, meta = load_record(path, ("points",), "cloud record")
+    normals = arrays.get("normals")
+    return arrays["points"].astype(np.float64), None if normals is None else normals.astype(np.float64), meta
 
 
 def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
@@ -136,12 +157,8 @@ def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 def write_cloud(path: str | Path, cloud: Cloud) -> None:
     """Write the pipeline's `.npz` cloud record (float32 is not used: noise at 0.05% needs float64)."""
-    with atomic_path(path) as tmp:
-        arrays = {"points": cloud.points, "meta": np.array(json.dumps(cloud.meta, sort_keys=True))}
-        if cloud.normals is not None:
-            arrays["normals"] = cloud.normals
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+    arrays = {"points": cloud.points} if cloud.normals is None else {"points": cloud.points, "normals": cloud.normals}
+    save_record(path, arrays, cloud.meta)
 
 
 def write_xyz_normals(base: str | Path, points: np.ndarray, normals: np.ndarray | None = None) -> None:

@@ -196,9 +196,9 @@ def tracked_keys(raw: dict[str, Any], step: Step) -> list[str]:
 
 
 def tracked_params(raw: dict[str, Any], step: Step) -> dict[str, Any]:
-    """Values of `tracked_keys` as Snakemake rule params: resolved for the step's keys, raw for overrides."""
-    resolved = config.resolve(raw)
-    return {k: config.get(raw if k.startswith("profiles.") else resolved, k) for k in tracked_keys(raw, step)}
+    """Values of `tracked_keys` as Snakemake rule params, read from the raw file exactly as DVC reads them, so a
+    change of any of them (even one masked by the active profile) reruns the step in both tools."""
+    return {k: config.get(raw, k) for k in tracked_keys(raw, step)}
 
 
 def dvc_yaml(raw: dict[str, Any]) -> dict[str, Any]:

@@ -22,4 +22,4 @@ rule features:
         "../envs/refinenet.yaml"
     shell:
         "python -m stages.features --cloud {input.cloud} --initial {input.initial} --config {params.config:q}"
-        " --out {output} --threads {threads} 2>&1 | tee {log}"
+        " --progress --out {output} --threads {threads} 2>&1 | tee {log}"

@@ -26,5 +26,5 @@ rule initial_normals:
     shell:
         "python -m stages.initial_normals --method {wildcards.method} --cloud {input.cloud}"
         " --scales {params.scales} --trials {params.mfps[trials]} --theta-t {params.mfps[theta_t]}"
-        " --a-max {params.mfps[a_max]} --eta {params.mfps[eta]} --seed {params.seed} --out {output}"
+        " --a-max {params.mfps[a_max]} --eta {params.mfps[eta]} --seed {params.seed} --progress --out {output}"
         " --threads {threads} 2>&1 | tee {log}"

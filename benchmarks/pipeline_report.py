@@ -1,0 +1,58 @@
+"""Summarise a finished pipeline run: wall time, and per rule the jobs, summed job seconds and peak memory.
+
+Reads the per-job benchmark files that every rule writes (`logs/<rule>/**/*.benchmark.tsv`) in a run folder and
+writes a markdown report. The total wall time is measured by the caller (e.g. `time bash scripts/run.sh`) and
+passed in, since job seconds overlap when jobs run in parallel.
+Usage: python benchmarks/pipeline_report.py RUN_DIR --wall-seconds S --profile cpu \
+    --out benchmarks/results/pipeline_cpu.md
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+from pathlib import Path
+
+import pandas as pd
+
+
+def rule_summary(run_dir: Path) -> pd.DataFrame:
+    rows = []
+    for path in sorted((run_dir / "logs").rglob("*.benchmark.tsv")):
+        rule = path.relative_to(run_dir / "logs").parts[0].removesuffix(".benchmark.tsv")
+        bench = pd.read_csv(path, sep="\t")
+        rows.append({"rule": rule, "seconds": bench["s"].iloc[0], "max_rss_mb": bench["max_rss"].iloc[0]})
+    jobs = pd.DataFrame(rows)
+    return jobs.groupby("rule", sort=False).agg(jobs=("seconds", "size"), job_seconds=("seconds", "sum"),
+                                                longest_job_s=("seconds", "max"), peak_rss_mb=("max_rss_mb", "max"))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--wall-seconds", type=float, required=True)
+    parser.add_argument("--profile", required=True)
+    parser.add_argument("--command", default="bash scripts/run.sh")
+    parser.add_argument("--out", type=Path, required=True)
+    args = parser.parse_args()
+    summary = rule_summary(args.run_dir)
+    lines = [
+        f"# Pipeline run, profile `{args.profile}`",
+        "",
+        f"`{args.command}` on a fresh clone: **{args.wall_seconds / 60:.1f} minutes** wall time in total "
+        f"(environment set-up included), on {os.cpu_count()} cores, {platform.machine()}, Python "
+        f"{platform.python_version()}. Job seconds are summed over jobs that ran two at a time.",
+        "",
+        "| rule | jobs | job seconds (sum) | longest job (s) | peak memory of a job (MB) |",
+        "|---|---|---|---|---|",
+        *(f"| {rule} | {int(r.jobs)} | {r.job_seconds:.0f} | {r.longest_job_s:.1f} | {r.peak_rss_mb:.0f} |"
+          for rule, r in summary.iterrows()),
+        "",
+    ]
+    args.out.write_text("\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
