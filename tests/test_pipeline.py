@@ -89,6 +89,7 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
 
 
 TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
+SEEDED = {"train_clouds", "test_clouds", "mfps", "simple_mfps", "clusters", "train", "refine"}
 
 
 @pytest.mark.parametrize(
@@ -97,7 +98,7 @@ TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
         ("  jet_k: 100", "  jet_k: 90", {"baselines"} | TABLES),
         ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps", "table_synthetic", "table_synthetic_pgp"}),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES),
-        ("seed: 2022", "seed: 7", {"train_clouds", "test_clouds", "mfps", "simple_mfps", "clusters", "train", "refine"}),
+        ("seed: 2022", "seed: 7", SEEDED),
         ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}",
          {"train_clouds", "test_clouds"} | TABLES),
         ("  hmp_k: 100", "  hmp_k: 90", {"features", "table_synthetic", "table_synthetic_pgp"}),
