@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import time
 from collections.abc import Callable
@@ -30,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 import scipy
+from machine import machine_info
 
 from refinenet.atomic import write_text
 from refinenet.baselines import pca_normals
@@ -80,16 +80,7 @@ def best_run(fn: Callable[[], np.ndarray], repeats: int) -> tuple[np.ndarray, li
 
 
 def machine(threads: int) -> dict:
-    cpu = platform.processor()
-    if Path("/proc/cpuinfo").exists():
-        names = [ln.split(":", 1)[1].strip() for ln in Path("/proc/cpuinfo").read_text().splitlines()
-                 if ln.startswith("model name")]
-        cpu = names[0] if names else cpu
-    return {
-        "cpu": cpu, "cores": len(os.sched_getaffinity(0)), "threads": threads,
-        "memory_gb": psutil.virtual_memory().total / 2**30, "platform": platform.platform(),
-        "python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
-    }
+    return machine_info(threads=threads, numpy=np.__version__, scipy=scipy.__version__)
 
 
 def run_case(n: int, repeats: int, threads: int) -> dict:

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 import open3d as o3d
+from machine import machine_info
 
 from refinenet.baselines import pca_normals
 from refinenet.metrics import unoriented_angles
@@ -62,15 +61,14 @@ def main() -> None:
         "points": args.points, "k": args.k, "repeats": args.repeats,
         "ours_s": round(t_ours, 4), "open3d_s": round(t_o3d, 4), "ratio_ours_over_open3d": round(t_ours / t_o3d, 3),
         "mean_angle_to_open3d_deg": float(angles.mean()), "max_angle_to_open3d_deg": float(angles.max()),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "open3d": o3d.__version__, "numpy": np.__version__,
+        "machine": machine_info(open3d=o3d.__version__, numpy=np.__version__),
     }
     print(json.dumps(result, indent=2))
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "pca.json").write_text(json.dumps(result, indent=2) + "\n")
     (RESULTS / "pca.md").write_text(
         "# PCA normals: ours vs Open3D\n\n"
-        f"{args.points} points, k = {args.k}, best of {args.repeats} runs, {result['machine']}.\n\n"
+        f"{args.points} points, k = {args.k}, best of {args.repeats} runs; machine: {result['machine']}.\n\n"
         "| implementation | time (s) |\n|---|---|\n"
         f"| refinenet.baselines.pca_normals | {t_ours:.3f} |\n| open3d estimate_normals (KNN) | {t_o3d:.3f} |\n\n"
         f"Ratio ours / Open3D: **{t_ours / t_o3d:.2f}** (target: at most 1). "
