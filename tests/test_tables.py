@@ -41,8 +41,8 @@ def test_csv_and_latex(per_cloud, tmp_path):
     table = aggregate(per_cloud, "synthetic", ["mean", "rmse"])
     csv = to_csv_frame(table)
     assert list(csv.index) == ["PCA", "Jet"] and "BigNoise/mean" in csv.columns
-    tex = to_latex(table, "Errors; profile smoke, 5% of l_d", "table_test")
-    assert "\\toprule" in tex and "\\cmidrule(lr){2-3}" in tex and "5\\% of l\\_d" in tex
+    tex = to_latex(table, "Errors; profile smoke, 5% of l_d, K = {50, 100}", "table_test")
+    assert "\\toprule" in tex and "\\cmidrule(lr){2-3}" in tex and "5\\% of l\\_d, K = \\{50, 100\\}" in tex
     jet_row = next(line for line in tex.splitlines() if line.startswith("Jet"))
     assert jet_row.count("\\textbf") == 8  # jet is best everywhere
     if shutil.which("pdflatex") is None:

@@ -87,7 +87,7 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
 
 
 def _escape(text: str) -> str:
-    for char in "&%$#_":
+    for char in "&%$#_{}":
         text = text.replace(char, "\\" + char)
     return text
 
