@@ -29,11 +29,14 @@ def with_value(dotted, value):
 
 
 def test_profiles_override_only_their_keys():
-    for name in ("smoke", "cpu", "paper"):
+    for name in ("smoke", "cpu", "release", "paper"):
         p = resolve(with_value("profile", name))
         assert p["profile"] == name
         assert p["baselines"] == RAW["baselines"]
     assert resolve(with_value("profile", "paper"))["data"]["n_points"] == 100000
+    release, paper = resolve(with_value("profile", "release"))["mfps"], resolve(with_value("profile", "paper"))["mfps"]
+    assert (release["scales"], release["theta_t"], release["eta"]) == ([50, 100], 45, "code")
+    assert (paper["scales"], paper["theta_t"], paper["eta"]) == ([50, 100, 150], 60, "paper")
     assert resolve(with_value("profile", "smoke"))["data"]["max_shapes"] == 1
 
 
