@@ -16,6 +16,8 @@ import yaml
 from refinenet.errors import ParamsError
 
 SCHEMA = Path("workflow/schemas/params.schema.yaml")
+#: Mappings whose keys are data (categories, list names), replaced whole by an override.
+OPEN_MAPPINGS = frozenset({"test_lists", "test"})
 
 
 def deep_merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -31,9 +33,6 @@ def deep_merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "")
             merged[key] = copy.deepcopy(value)
     return merged
 
-
-#: Mappings whose keys are data (categories, list names), replaced whole by an override.
-OPEN_MAPPINGS = frozenset({"test_lists", "test"})
 
 
 def get(params: dict[str, Any], dotted: str) -> Any:
