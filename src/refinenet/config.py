@@ -34,7 +34,6 @@ def deep_merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "")
     return merged
 
 
-
 def get(params: dict[str, Any], dotted: str) -> Any:
     """The value at a dotted key, e.g. `get(p, "data.n_points")`."""
     value: Any = params
