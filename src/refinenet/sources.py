@@ -55,7 +55,7 @@ def _category(folder: str) -> str:
     return CATEGORY_ALIASES.get(folder.lower(), _SAFE.sub("_", folder))
 
 
-def _noise_levels(data: dict[str, Any], noise: dict[str, Any], split: str, category: str) -> list[float]:
+def _noise_levels(noise: dict[str, Any], split: str, category: str) -> list[float]:
     if split == "train":
         return list(noise["train"])
     levels = noise["test"].get(category)
@@ -98,7 +98,7 @@ def _procedural(data: dict[str, Any], noise: dict[str, Any]) -> list[CloudSpec]:
         for category in shapes.CATEGORIES:
             names = [n for n, s in catalogue.items() if s.split == split and s.category == category]
             for name in _limit(names, data):
-                specs += _noisy_specs(split, category, name, name, _noise_levels(data, noise, split, category))
+                specs += _noisy_specs(split, category, name, name, _noise_levels(noise, split, category))
     return specs
 
 
@@ -118,7 +118,7 @@ def _folder(data: dict[str, Any], noise: dict[str, Any], suffixes: tuple[str, ..
             for f in files:
                 stem = _SAFE.sub("_", f.stem)
                 if synthesise:
-                    specs += _noisy_specs(split, category, stem, str(f), _noise_levels(data, noise, split, category))
+                    specs += _noisy_specs(split, category, stem, str(f), _noise_levels(noise, split, category))
                 else:
                     specs.append(CloudSpec(split, category, stem, str(f), None))
     return specs
