@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from collections.abc import Callable
 from typing import TypeVar
@@ -17,9 +16,8 @@ EXIT_BAD_INPUT = 2
 
 
 def limit_threads(threads: int) -> None:
-    """Use at most `threads` cores in BLAS, OpenMP and torch, so parallel jobs never oversubscribe the machine."""
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = str(threads)
+    """Use at most `threads` cores in torch, so parallel jobs never oversubscribe the machine. (BLAS and OpenMP
+    are limited before numpy loads, by the `stages` package.)"""
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(threads)
 
