@@ -1,7 +1,7 @@
 """Thin entry points, one per Snakemake rule: parse explicit paths and parameters, call the library,
 write outputs atomically. No algorithm code lives here.
 
-BLAS and OpenMP read their thread count once, when numpy is first imported, so the `--threads` of the job
+BLAS, OpenMP and numba read their thread count once, when first imported, so the `--threads` of the job
 (default 1) is put into the environment here, before any stage module imports numpy.
 """
 
@@ -10,5 +10,5 @@ import sys
 
 _THREADS = sys.argv[sys.argv.index("--threads") + 1] if "--threads" in sys.argv[:-1] else "1"
 if _THREADS.isdigit():
-    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ[_var] = _THREADS

@@ -7,14 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from refinenet.neighbors import build_tree, chunks, covariances, knn, smallest_eigenvectors
+from refinenet.neighbors import build_tree, chunks, covariances, knn, knn_covariances, smallest_eigenvectors
 
 
 def pca_normals(points: np.ndarray, k: int) -> np.ndarray:
     """Normal = eigenvector of the smallest eigenvalue of the k-neighbourhood covariance (Hoppe et al. 1992)."""
-    _, idx = knn(points, k)
-    _, covs = covariances(points, idx)
-    return smallest_eigenvectors(covs)[1]
+    return smallest_eigenvectors(knn_covariances(points, k))[1]
 
 
 def _monomials(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:

@@ -76,8 +76,8 @@ class Step:
 
 _CLOUD_MODULES = ("sources", "shapes", "meshes", "io", "noise", "atomic", "errors", "stage")
 _STAGE_MODULES = ("io", "atomic", "errors", "stage")
-MFPS_MODULES = ("mfps", "neighbors", "noise")
-_FEATURE_MODULES = ("features", "filtering", "frames", "heightmaps", "neighbors", "noise")
+MFPS_MODULES = ("mfps", "grid_knn", "neighbors", "noise")
+_FEATURE_MODULES = ("features", "filtering", "frames", "heightmaps", "grid_knn", "neighbors", "noise")
 _NETWORK_MODULES = (*_FEATURE_MODULES, "clustering", "dataset", "model", "patches")
 
 
@@ -138,7 +138,7 @@ STEPS: dict[str, Step] = {s.stage: s for s in (
         targets=lambda p, split=split: [cloud_path(c) for c in clouds(p, split)],
     ) for split in ("train", "test")),
     _normals_step("baselines", "baseline_normals", "baselines.smk", "stages/baseline_normals.py",
-                  ("baselines", "neighbors"), ("baselines",), BASELINES),
+                  ("baselines", "grid_knn", "neighbors"), ("baselines",), BASELINES),
     _normals_step("mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",
                   MFPS_MODULES, ("mfps", "seed"), ("mfps",), ("train", "test")),
     _normals_step("simple_mfps", "initial_normals", "initial_normals.smk", "stages/initial_normals.py",

@@ -1,0 +1,133 @@
+"""The uniform-grid kNN kernels against the k-d tree (the reference) on clouds of every awkward kind."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from refinenet import grid_knn, neighbors
+from refinenet.baselines import pca_normals
+from refinenet.metrics import unoriented_angles
+
+RNG = np.random.default_rng(7)
+
+
+def _sphere(n: int, noise: float = 0.0) -> np.ndarray:
+    d = RNG.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return d + noise * RNG.normal(size=(n, 3))
+
+
+CLOUDS = {
+    "noisy sphere": _sphere(6000, 0.002),
+    "uniform cube": RNG.random((6000, 3)),
+    "plane (flat axis)": np.c_[RNG.random((6000, 2)), np.zeros(6000)],
+    "line": np.c_[np.linspace(0, 1, 3000), np.zeros(3000), np.zeros(3000)] + 1e-4 * RNG.random((3000, 3)),
+    "far outliers": np.concatenate([_sphere(5900, 0.002), RNG.normal(0, 100, (100, 3))]),
+    "far from origin": _sphere(5000, 0.002) * 0.01 + 1e4,
+}
+
+
+def _grid_answer(points: np.ndarray, k: int, query: np.ndarray | None = None):
+    tree = cKDTree(points)
+    grid = grid_knn.build_grid(points, k, tree)
+    assert grid is not None
+    return grid_knn.grid_knn(grid, points if query is None else query, k)
+
+
+@pytest.mark.parametrize("name", list(CLOUDS))
+@pytest.mark.parametrize("k", [1, 16, 100])
+def test_grid_knn_equals_the_tree(name, k):
+    points = CLOUDS[name]
+    dist, idx, done = _grid_answer(points, k)
+    ref_dist, ref_idx = cKDTree(points).query(points, k=k)
+    ref_dist, ref_idx = ref_dist.reshape(len(points), k), ref_idx.reshape(len(points), k)
+    assert done.mean() > 0.5, "the grid should answer most queries itself"
+    np.testing.assert_array_equal(dist[done], ref_dist[done])  # bit-identical distances, sorted ascending
+    np.testing.assert_array_equal(idx[done], ref_idx[done])
+    assert np.all(idx[done, 0] == np.flatnonzero(done))  # the query point comes first
+
+
+def test_grid_answers_nearly_every_query_on_a_surface():
+    _, _, done = _grid_answer(CLOUDS["noisy sphere"], 50)
+    assert done.mean() > 0.9
+
+
+def test_queries_off_the_cloud_and_beyond_the_grid():
+    points = CLOUDS["noisy sphere"]
+    query = np.concatenate([_sphere(2000) * 1.01, [[50.0, 0, 0], [0, -1e3, 2]]])
+    dist, idx, done = _grid_answer(points, 30, query)
+    ref_dist, ref_idx = cKDTree(points).query(query, k=30)
+    np.testing.assert_array_equal(idx[done], ref_idx[done])
+    np.testing.assert_array_equal(dist[done], ref_dist[done])
+    assert done[:2000].mean() > 0.9
+
+
+def test_duplicate_points_give_the_same_distances():
+    points = np.repeat(RNG.random((2000, 3)), 4, axis=0)
+    dist, idx, done = _grid_answer(points, 20)
+    ref_dist, _ = cKDTree(points).query(points, k=20)
+    assert done.mean() > 0.9
+    np.testing.assert_array_equal(dist[done], ref_dist[done])  # ties may come in another order
+    rows = np.flatnonzero(done)
+    np.testing.assert_allclose(np.linalg.norm(points[idx[rows]] - points[rows, None], axis=2), dist[rows])
+
+
+def test_no_grid_where_it_would_not_pay():
+    clusters = np.concatenate([RNG.normal(0, 0.001, (3000, 3)), RNG.normal(10, 1.0, (3000, 3))])
+    assert grid_knn.build_grid(clusters, 20, cKDTree(clusters)) is None
+    same = np.zeros((500, 3))
+    assert grid_knn.build_grid(same, 20, cKDTree(same)) is None
+
+
+@pytest.mark.parametrize("name", ["noisy sphere", "far outliers", "far from origin"])
+def test_grid_covariances_equal_the_reference(name):
+    points = CLOUDS[name]
+    tree = cKDTree(points)
+    covs, done = grid_knn.grid_covariances(grid_knn.build_grid(points, 40, tree), 40)
+    ref = neighbors.covariances(points, tree.query(points, k=40)[1])[1]
+    assert done.mean() > 0.9
+    scale = np.abs(ref).max(axis=(1, 2))[done, None, None]
+    np.testing.assert_allclose(covs[done] / scale, ref[done] / scale, atol=1e-9)
+
+
+@pytest.fixture
+def grid_everywhere(monkeypatch):
+    """Send even small query sets through the grid, so the public functions take the grid path here."""
+    monkeypatch.setattr(neighbors, "GRID_MIN_QUERIES", 0)
+
+
+@pytest.mark.parametrize("name", list(CLOUDS))
+def test_knn_is_exact_for_every_query(grid_everywhere, name):
+    points = CLOUDS[name]
+    dist, idx = neighbors.knn(points, 25)
+    ref_dist, ref_idx = cKDTree(points).query(points, k=25)
+    np.testing.assert_array_equal(dist, ref_dist)
+    np.testing.assert_array_equal(idx, ref_idx)
+    assert idx.dtype == np.int64
+
+
+def test_knn_int32_lists_without_distances(grid_everywhere):
+    points = CLOUDS["noisy sphere"]
+    dist, idx = neighbors.knn(points, 25, with_distances=False, index_dtype=np.int32)
+    assert dist is None and idx.dtype == np.int32
+    np.testing.assert_array_equal(idx, cKDTree(points).query(points, k=25)[1])
+
+
+@pytest.mark.parametrize("name", list(CLOUDS))
+def test_knn_covariances_match_for_every_point(grid_everywhere, name):
+    points = CLOUDS[name]
+    covs = neighbors.knn_covariances(points, 30)
+    ref = neighbors.covariances(points, cKDTree(points).query(points, k=30)[1])[1]
+    scale = np.abs(ref).max(axis=(1, 2))[:, None, None] + 1e-300
+    np.testing.assert_allclose(covs / scale, ref / scale, atol=1e-9)
+
+
+def test_pca_on_the_grid_recovers_known_normals(grid_everywhere):
+    uv = RNG.random((20000, 2))
+    axis_u, axis_v = np.array([1.0, 2.0, 0.5]), np.array([-2.0, 1.0, 0.0])
+    normal = np.cross(axis_u, axis_v) / np.linalg.norm(np.cross(axis_u, axis_v))
+    plane = uv[:, :1] * axis_u + uv[:, 1:] * axis_v + 3.0
+    assert unoriented_angles(pca_normals(plane, 30), normal[None]).max() < 1e-5
+    sphere = _sphere(20000)
+    angles = unoriented_angles(pca_normals(sphere, 30), sphere)
+    assert angles.mean() < 0.5 and angles.max() < 2.0
