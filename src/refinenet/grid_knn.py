@@ -118,7 +118,7 @@ def grid_knn(grid: Grid, queries: np.ndarray, k: int, with_distances: bool = Tru
     dist = np.empty((m, k) if with_distances else (0, k))
     idx = np.empty((m, k), dtype=index_dtype)
     done = np.zeros(m, dtype=np.bool_)
-    _knn_kernel(*_kernel_args(grid, queries), k, RINGS, grid.cap, grid.band, dist, idx, done)
+    _kernel(*_kernel_args(grid, queries), k, RINGS, grid.cap, grid.band, dist, idx, np.empty((0, 3, 3)), done)
     return (dist if with_distances else None), idx, done
 
 
@@ -128,7 +128,8 @@ def grid_covariances(grid: Grid, k: int) -> tuple[np.ndarray, np.ndarray]:
     m = len(grid.cloud)
     covs = np.empty((m, 3, 3))
     done = np.zeros(m, dtype=np.bool_)
-    _covariance_kernel(*_kernel_args(grid, grid.cloud), k, RINGS, grid.cap, grid.band, covs, done)
+    _kernel(*_kernel_args(grid, grid.cloud), k, RINGS, grid.cap, grid.band, np.empty((0, k)),
+            np.empty((0, k), dtype=np.int64), covs, done)
     return covs, done
 
 
@@ -268,53 +269,49 @@ def _nearest(d, k, band, margin):
 
 
 @njit(parallel=True, cache=True)
-def _knn_kernel(sp, order, starts, dims, origin, cell, queries, visit, k, rings, cap, band, dist, idx, done):
+def _kernel(sp, order, starts, dims, origin, cell, queries, visit, k, rings, cap, band, dist, idx, covs, done):
+    """kNN lists (into dist, unless it has no rows, and idx) or, when covs has rows, covariances instead."""
     for t in prange(len(visit)):
         q = visit[t]
         d, j, margin = _candidates(sp, starts, dims, origin, cell, queries[q], rings, cap)
         w = _nearest(d, k, band, margin)
         if len(w) == 0:
             continue
-        take = np.flatnonzero(w)
-        take = take[np.argsort(d[take])]
-        for s in range(k):
-            idx[q, s] = order[j[take[s]]]
-        if dist.shape[0] > 0:
+        if covs.shape[0] > 0:
+            _covariance(sp, j, w, queries[q], k, covs[q])
+        else:
+            take = np.flatnonzero(w)
+            take = take[np.argsort(d[take])]
             for s in range(k):
-                dist[q, s] = np.sqrt(d[take[s]])
+                idx[q, s] = order[j[take[s]]]
+            if dist.shape[0] > 0:
+                for s in range(k):
+                    dist[q, s] = np.sqrt(d[take[s]])
         done[q] = True
 
 
-@njit(parallel=True, cache=True)
-def _covariance_kernel(sp, order, starts, dims, origin, cell, queries, visit, k, rings, cap, band, covs, done):
-    for t in prange(len(visit)):
-        q = visit[t]
-        d, j, margin = _candidates(sp, starts, dims, origin, cell, queries[q], rings, cap)
-        w = _nearest(d, k, band, margin)
-        if len(w) == 0:
-            continue
-        # moments about the query point (close to the centroid, so the one-pass formula stays accurate),
-        # weighted 0/1 rather than branching on a mispredictable test
-        qx, qy, qz = queries[q, 0], queries[q, 1], queries[q, 2]
-        sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
-        for s in range(len(d)):
-            x = (sp[j[s], 0] - qx) * w[s]
-            y = (sp[j[s], 1] - qy) * w[s]
-            z = (sp[j[s], 2] - qz) * w[s]
-            sx += x
-            sy += y
-            sz += z
-            sxx += x * x
-            sxy += x * y
-            sxz += x * z
-            syy += y * y
-            syz += y * z
-            szz += z * z
-        mx, my, mz = sx / k, sy / k, sz / k
-        covs[q, 0, 0] = sxx / k - mx * mx
-        covs[q, 1, 1] = syy / k - my * my
-        covs[q, 2, 2] = szz / k - mz * mz
-        covs[q, 0, 1] = covs[q, 1, 0] = sxy / k - mx * my
-        covs[q, 0, 2] = covs[q, 2, 0] = sxz / k - mx * mz
-        covs[q, 1, 2] = covs[q, 2, 1] = syz / k - my * mz
-        done[q] = True
+@njit(cache=True)
+def _covariance(sp, j, w, q, k, out):
+    """Covariance (divided by k) of the candidates of weight 1, accumulated about the query point q (close to
+    the centroid, so the one-pass formula stays accurate); 0/1 weights rather than a mispredictable branch."""
+    sx = sy = sz = sxx = sxy = sxz = syy = syz = szz = 0.0
+    for s in range(len(j)):
+        x = (sp[j[s], 0] - q[0]) * w[s]
+        y = (sp[j[s], 1] - q[1]) * w[s]
+        z = (sp[j[s], 2] - q[2]) * w[s]
+        sx += x
+        sy += y
+        sz += z
+        sxx += x * x
+        sxy += x * y
+        sxz += x * z
+        syy += y * y
+        syz += y * z
+        szz += z * z
+    mx, my, mz = sx / k, sy / k, sz / k
+    out[0, 0] = sxx / k - mx * mx
+    out[1, 1] = syy / k - my * my
+    out[2, 2] = szz / k - mz * mz
+    out[0, 1] = out[1, 0] = sxy / k - mx * my
+    out[0, 2] = out[2, 0] = sxz / k - mx * mz
+    out[1, 2] = out[2, 1] = syz / k - my * mz
