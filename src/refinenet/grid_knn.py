@@ -64,9 +64,6 @@ class Grid:
     band: np.ndarray  # (2,) float64: squared distances where the k-th neighbour usually lies
     cap: int  # most candidates one query may scan; fuller blocks go to the tree
 
-    def cell_ids(self, points: np.ndarray) -> np.ndarray:
-        return _cell_ids(points, self.origin, self.cell, self.dims)
-
 
 def _cell_ids(points: np.ndarray, origin: np.ndarray, cell: float, dims: np.ndarray) -> np.ndarray:
     """Linear cell index of each point; points beyond the grid go to its border cells, which keeps every
@@ -135,7 +132,10 @@ def grid_covariances(grid: Grid, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _kernel_args(grid: Grid, queries: np.ndarray) -> tuple:
     """Grid arrays plus the queries and their visiting order (by cell, so neighbouring queries share cache)."""
-    visit = grid.order if queries is grid.cloud else np.argsort(grid.cell_ids(queries), kind="stable")
+    if queries is grid.cloud:
+        visit = grid.order
+    else:
+        visit = np.argsort(_cell_ids(queries, grid.origin, grid.cell, grid.dims), kind="stable")
     return grid.points, grid.order, grid.starts, grid.dims, grid.origin, grid.cell, queries, visit
 
 

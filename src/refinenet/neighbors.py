@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import numpy as np
 from scipy.spatial import cKDTree
 
-from refinenet.grid_knn import build_grid, grid_covariances, grid_knn
+from refinenet.grid_knn import Grid, build_grid, grid_covariances, grid_knn
 
 #: Neighbour entries (rows x k) gathered per chunk: small enough that the gathered arrays stay in cache
 #: (measured: 100k x 100 covariances take 0.1 s in chunks of 1M entries, 0.65 s in chunks of 8M).
@@ -37,7 +37,7 @@ def knn(points: np.ndarray, k: int, tree: cKDTree | None = None, query: np.ndarr
     points = _cloud_for(points, k)
     tree = tree if tree is not None else build_tree(points)
     q = points if query is None else np.asarray(query, dtype=np.float64)
-    grid = build_grid(points, k, tree) if len(q) >= max(GRID_MIN_QUERIES, len(points) // 4) else None
+    grid = _grid_for(points, k, tree, len(q))
     if grid is None:
         dist = np.empty((len(q), k)) if with_distances else None
         idx = np.empty((len(q), k), dtype=index_dtype)
@@ -47,6 +47,11 @@ def knn(points: np.ndarray, k: int, tree: cKDTree | None = None, query: np.ndarr
         rows = np.flatnonzero(~done)
     _tree_knn(tree, q, k, rows, dist, idx)
     return dist, idx
+
+
+def _grid_for(points: np.ndarray, k: int, tree: cKDTree, n_queries: int) -> Grid | None:
+    """A grid for kNN_k on `points` when `n_queries` queries repay its sort of the cloud, else None."""
+    return build_grid(points, k, tree) if n_queries >= max(GRID_MIN_QUERIES, len(points) // 4) else None
 
 
 def _cloud_for(points: np.ndarray, k: int) -> np.ndarray:
@@ -76,7 +81,7 @@ def knn_covariances(points: np.ndarray, k: int) -> np.ndarray:
     without storing the neighbour lists (the grid kernel accumulates them as it finds them)."""
     points = _cloud_for(points, k)
     tree = build_tree(points)
-    grid = build_grid(points, k, tree) if len(points) >= GRID_MIN_QUERIES else None
+    grid = _grid_for(points, k, tree, len(points))
     if grid is None:
         covs, done = np.empty((len(points), 3, 3)), np.zeros(len(points), dtype=bool)
     else:
