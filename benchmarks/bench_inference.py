@@ -1,4 +1,4 @@
-"""Inference throughput of the full Refine-Net (ALGORITHM.md §8) on CPU, in points per second.
+"""Inference throughput of the full Refine-Net (docs/algorithm.md §8) on CPU, in points per second.
 
 Each configuration is timed in eval mode under torch.inference_mode on random inputs, as trained (plain) and
 as the BN-folded copy `fuse_batch_norm` makes for inference, alternating with a reference: one float32 GEMM
@@ -27,7 +27,7 @@ import torch
 from machine import machine_info
 
 from refinenet.atomic import write_text
-from refinenet.model import (
+from refinenet.network.model import (
     NetworkConfig,
     RefineNet,
     architecture_table,

@@ -1,4 +1,4 @@
-"""MFPS initial normals (ALGORITHM.md §2) on a noisy CAD-like cloud: time, per-step breakdown, memory, accuracy.
+"""MFPS initial normals (docs/algorithm.md §2) on a noisy CAD-like cloud: time, per-step breakdown, memory, accuracy.
 
 The cloud is fandisk with 0.1% Gaussian noise of the bbox diagonal (seeded): PCPNet's fandisk100k.xyz for
 100k points, else a sample of the fandisk mesh of ../shared/data (face normals as ground truth), else the
@@ -31,15 +31,19 @@ import psutil
 import scipy
 from machine import machine_info
 
+from refinenet import config as params_lib
 from refinenet.atomic import write_text
-from refinenet.baselines import pca_normals
-from refinenet.io import read_cloud
-from refinenet.meshes import read_mesh, sample_mesh
-from refinenet.metrics import ErrorStats, unoriented_angles
-from refinenet.mfps import MFPSConfig, mfps_normals
-from refinenet.neighbors import knn
-from refinenet.noise import add_gaussian_noise
-from refinenet.shapes import sample_shape
+from refinenet.data.io import read_cloud
+from refinenet.data.meshes import read_mesh, sample_mesh
+from refinenet.data.noise import add_gaussian_noise
+from refinenet.data.shapes import sample_shape
+from refinenet.estimators.baselines import pca_normals
+from refinenet.estimators.mfps import mfps_normals
+from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
+from refinenet.geometry.neighbors import knn
+
+#: MFPS as params.yaml sets it (its own values, no profile): the paper's synthetic settings.
+MFPS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False).mfps
 
 RESULTS = Path(__file__).parent / "results"
 DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data"
@@ -86,7 +90,7 @@ def machine(threads: int) -> dict:
 def run_case(n: int, repeats: int, threads: int) -> dict:
     clean, truth, source = cloud(n)
     points = add_gaussian_noise(clean, NOISE_PERCENT, SEED)
-    config = MFPSConfig()
+    config = MFPS
     load_start = os.getloadavg()[0]
     rss_before = psutil.Process().memory_info().rss
     runs: list[dict] = []
@@ -162,7 +166,7 @@ def markdown(record: dict) -> str:
         lines.append(f"| {c['points']:,} | " + " | ".join(cells) + " |")
     lines += ["", "Accuracy against the ground-truth normals (unoriented angles in degrees; *near edges*: points "
               "whose 10 nearest clean neighbours include a true normal more than 30 degrees away). MFPS gives "
-              "smooth points the PCA normal with k0 = min(K) = 50 (ALGORITHM.md §2 A.1), so pca_k50 is what "
+              "smooth points the PCA normal with k0 = min(K) = 50 (docs/algorithm.md §2 A.1), so pca_k50 is what "
               "MFPS returns away from features:", "",
               "| points | method | mean | RMSE | PGP 5 | PGP 10 | mean near edges |", "|---|---|---|---|---|---|---|"]
     for c in cases:

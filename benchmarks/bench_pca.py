@@ -20,10 +20,10 @@ import numpy as np
 import open3d as o3d
 from machine import machine_info
 
-from refinenet.baselines import pca_normals
-from refinenet.metrics import unoriented_angles
-from refinenet.neighbors import build_tree, covariances, smallest_eigenvectors
-from refinenet.noise import add_gaussian_noise
+from refinenet.data.noise import add_gaussian_noise
+from refinenet.estimators.baselines import pca_normals
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.geometry.neighbors import build_tree, covariances, smallest_eigenvectors
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -84,7 +84,7 @@ def main() -> None:
         "# PCA normals: ours vs Open3D\n\n"
         f"{args.points} points, k = {args.k}, best of {args.repeats} runs; machine: {result['machine']}.\n\n"
         "| implementation | time (s) |\n|---|---|\n"
-        f"| refinenet.baselines.pca_normals (grid kernels) | {t_ours:.3f} |\n"
+        f"| refinenet.estimators.baselines.pca_normals (grid kernels) | {t_ours:.3f} |\n"
         f"| k-d tree path (cKDTree kNN, covariances, eigh) | {t_tree:.3f} |\n"
         f"| open3d estimate_normals (KNN) | {t_o3d:.3f} |\n\n"
         f"Ratio ours / Open3D: **{t_ours / t_o3d:.2f}** (target: at most 1). "

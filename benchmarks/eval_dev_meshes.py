@@ -7,9 +7,9 @@ report all categories."
 Every mesh of ../shared/data/meshes/dev/<sharp|smooth|rich>/ is sampled area-uniformly (ground truth: the
 normal of the face a point lies on) and perturbed with Gaussian noise of 0.1% of the bounding-box diagonal;
 both seeds come from `derive_seed(2022, ...)` and the mesh's category/file name. Methods: `pca_normals`
-(k = 100), `jet_normals` (k = 100, degree 2), full MFPS (`MFPSConfig()`: K = {50, 100, 150}, R = 150,
-theta_t = 60, eta = code) and simple MFPS (`MFPSConfig(simple=True)`). Errors are unoriented angles;
-categories follow the synthetic protocol (`refinenet.tables.aggregate`: pooled mean and PGP, point-weighted
+(k = 100), `jet_normals` (k = 100, degree 2), full MFPS (`params.yaml `mfps`, no profile: K = {50, 100, 150}, R = 150,
+theta_t = 60, eta = code) and simple MFPS (the same with `simple`). Errors are unoriented angles;
+categories follow the synthetic protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-weighted
 RMSE, unweighted Average). "Near edges" are the points whose 10 nearest clean-sample neighbours include a
 ground-truth normal more than 30 degrees away.
 
@@ -27,26 +27,31 @@ import os
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from bench_mfps import machine, near_edges
 
+from refinenet import config as params_lib
 from refinenet.atomic import write_text
-from refinenet.baselines import jet_normals, pca_normals
-from refinenet.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
-from refinenet.metrics import ErrorStats, unoriented_angles
-from refinenet.mfps import MFPSConfig, mfps_normals
-from refinenet.noise import add_gaussian_noise, derive_seed
-from refinenet.tables import METHOD_NAMES, aggregate, stats_row, to_csv_frame
+from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
+from refinenet.data.noise import add_gaussian_noise, derive_seed
+from refinenet.estimators.baselines import jet_normals, pca_normals
+from refinenet.estimators.mfps import mfps_normals
+from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
+from refinenet.evaluation.table import METHOD_NAMES, aggregate, stats_row, to_csv_frame
+
+#: MFPS as params.yaml sets it (its own values, no profile): the paper's synthetic settings.
+MFPS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False).mfps
 
 RESULTS = Path(__file__).parent / "results"
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "meshes" / "dev"
 CATEGORIES = ("sharp", "smooth", "rich")
 GLOBAL_SEED = 2022
 METRICS = ("mean", "rmse", "pgp5", "pgp10")
-CONFIGS = {"mfps": MFPSConfig(), "simple_mfps": MFPSConfig(simple=True)}
+CONFIGS = {"mfps": MFPS, "simple_mfps": replace(MFPS, simple=True)}
 
 
 def dev_meshes(root: Path) -> list[tuple[str, Path]]:

@@ -1,6 +1,6 @@
-"""Slow, literal MFPS (ALGORITHM.md §2): plain loops over points, patches and trials, float64 throughout.
+"""Slow, literal MFPS (docs/algorithm.md §2): plain loops over points, patches and trials, float64 throughout.
 
-It exists only to check the vectorised `refinenet.mfps`. It shares two pieces with it: the random draws
+It exists only to check the vectorised `refinenet.estimators.mfps`. It shares two pieces with it: the random draws
 (`trial_indices`, so both see the same trials) and the L1 trend filter (tested on its own in test_mfps.py).
 Everything else is re-derived from the spec, line by line.
 """
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from refinenet.mfps import SIGMA_FLOOR, MFPSConfig, l1_trend_filter, trial_indices
+from refinenet.estimators.mfps import SIGMA_FLOOR, MFPSConfig, l1_trend_filter, trial_indices
 
 
 def _pca(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -61,7 +61,7 @@ def reference_bandwidth(points: np.ndarray, knn: np.ndarray, k0: int, k_bw: int)
 
 
 def reference_mfps(points: np.ndarray, config: MFPSConfig) -> np.ndarray:
-    """MFPS normals by the letter of ALGORITHM.md §2 (same seed -> same trials as the vectorised code)."""
+    """MFPS normals by the letter of docs/algorithm.md §2 (same seed -> same trials as the vectorised code)."""
     points = np.asarray(points, dtype=np.float64)
     n = len(points)
     k0, k_max, k_bw = config.k0, config.scales[-1], config.k_bw

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from known_shapes import fibonacci_sphere
 
-from refinenet.baselines import jet_normals, pca_normals
-from refinenet.metrics import unoriented_angles
-from refinenet.neighbors import covariances, knn
+from refinenet.estimators.baselines import jet_normals, pca_normals
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.geometry.neighbors import covariances, knn
 
 
 def test_knn_includes_self_first_and_rejects_large_k():

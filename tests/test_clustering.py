@@ -1,13 +1,16 @@
-"""Clustering (ALGORITHM.md §5): blob recovery, determinism, the imbalance guard, Kc = 1, the local feature, files."""
+"""Clustering (docs/algorithm.md §5): blob recovery, determinism, the imbalance guard, Kc = 1, the local feature,
+files."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from settings import clustering_config
 
-import refinenet.clustering as clustering
-from refinenet.clustering import (
+import refinenet.network.clustering as clustering
+from refinenet.errors import InputError
+from refinenet.network.clustering import (
     ClusterModel,
     assign,
     fit_clusters,
@@ -15,7 +18,6 @@ from refinenet.clustering import (
     local_normals,
     save_cluster_model,
 )
-from refinenet.errors import InputError
 
 
 def blobs(sizes: list[int], centres: np.ndarray, seed: int = 0, spread: float = 0.05,
@@ -39,7 +41,7 @@ CORNERS = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, -1.0, 0]])
 
 def test_separated_blobs_are_recovered():
     features, truth = blobs([900, 600, 300, 1200], CORNERS)
-    model = fit_clusters(features, n_clusters=4, seed=3)
+    model = fit_clusters(features, clustering_config(n_clusters=4), seed=3)
     labels = assign(model, features)
     assert labels.dtype.kind == "i" and labels.min() >= 0 and labels.max() <= 3
     assert same_partition(labels, truth)
@@ -47,8 +49,8 @@ def test_separated_blobs_are_recovered():
 
 def test_subsampled_fit_is_deterministic_and_still_recovers_the_blobs():
     features, truth = blobs([3000, 3000, 3000, 3000], CORNERS, seed=1)
-    first = fit_clusters(features, n_clusters=4, seed=7, max_samples=400)
-    second = fit_clusters(features, n_clusters=4, seed=7, max_samples=400)
+    first = fit_clusters(features, clustering_config(n_clusters=4, max_samples=400), seed=7)
+    second = fit_clusters(features, clustering_config(n_clusters=4, max_samples=400), seed=7)
     for name in ("mean", "components", "centres"):
         np.testing.assert_array_equal(getattr(first, name), getattr(second, name))
     assert same_partition(assign(first, features), truth)
@@ -65,16 +67,16 @@ def test_imbalance_guard_refits_without_the_tiny_cluster(monkeypatch):
         outliers = model.scores(features[truth == 3]).mean(axis=0)
         return float(np.linalg.norm(model.centres - outliers, axis=1).min())
 
-    model = fit_clusters(features, n_clusters=4, seed=0)
+    model = fit_clusters(features, clustering_config(n_clusters=4), seed=0)
     assert distance_to_outliers(model) > 10.0
     assert np.bincount(assign(model, features), minlength=4).min() >= 0.01 * len(features)
     monkeypatch.setattr(clustering, "MIN_CLUSTER_FRACTION", 0.0)
-    assert distance_to_outliers(fit_clusters(features, n_clusters=4, seed=0)) < 1.0
+    assert distance_to_outliers(fit_clusters(features, clustering_config(n_clusters=4), seed=0)) < 1.0
 
 
 def test_single_cluster():
     features, _ = blobs([200, 200], CORNERS[:2])
-    model = fit_clusters(features, n_clusters=1)
+    model = fit_clusters(features, clustering_config(n_clusters=1), seed=0)
     assert model.n_clusters == 1 and model.centres.shape == (1, 3)
     np.testing.assert_array_equal(assign(model, features), np.zeros(400, dtype=int))
 
@@ -89,7 +91,7 @@ def test_local_normals_rotate_every_normal_into_the_frame():
 
 def test_round_trip(tmp_path):
     features, _ = blobs([100, 100], CORNERS[:2])
-    model = fit_clusters(features, n_clusters=2)
+    model = fit_clusters(features, clustering_config(n_clusters=2), seed=0)
     path = tmp_path / "clusters.npz"
     save_cluster_model(path, model, {"seed": 0})
     loaded, meta = load_cluster_model(path)
@@ -104,6 +106,6 @@ def test_inconsistent_model_and_bad_arguments():
     with pytest.raises(ValueError, match="shapes"):
         ClusterModel(mean=np.zeros(27), components=np.zeros((3, 24)), centres=np.zeros((4, 3)))
     with pytest.raises(ValueError, match="n_clusters"):
-        fit_clusters(np.zeros((10, 27)), n_clusters=0)
+        fit_clusters(np.zeros((10, 27)), clustering_config(n_clusters=0), seed=0)
     with pytest.raises(ValueError, match="too few"):
-        fit_clusters(np.random.default_rng(0).random((3, 27)), n_clusters=4)
+        fit_clusters(np.random.default_rng(0).random((3, 27)), clustering_config(n_clusters=4), seed=0)

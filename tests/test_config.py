@@ -11,11 +11,10 @@ from refinenet.errors import ParamsError
 
 REPO = Path(__file__).resolve().parents[1]
 RAW = yaml.safe_load((REPO / "params.yaml").read_text())
-SCHEMA = REPO / "workflow/schemas/params.schema.yaml"
 
 
 def resolve(raw):
-    return config.resolve(raw, schema=SCHEMA)
+    return config.resolve(raw)
 
 
 def with_value(dotted, value):
@@ -69,4 +68,25 @@ def test_unreadable_file(tmp_path):
     bad = tmp_path / "params.yaml"
     bad.write_text("profile: [unclosed\n")
     with pytest.raises(ParamsError, match="cannot be read as YAML"):
-        config.load(bad, SCHEMA)
+        config.load(bad)
+
+
+def test_params_load_into_typed_blocks_from_any_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    params = config.load(REPO / "params.yaml")
+    assert params.profile == RAW["profile"]
+    assert params.mfps.scales == tuple(RAW["mfps"]["scales"]) and params.features.n_normals == 9
+    assert params.noise.levels("test", "BigNoise") == RAW["noise"]["test"]["BigNoise"]
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("features.hmp_size", 6, "features: hmp_size must be a positive odd number"),
+        ("mfps.scales", [100, 50], "mfps: MFPSConfig.scales: must be distinct and increasing"),
+    ],
+)
+def test_values_the_schema_cannot_judge_name_their_block(key, value, message):
+    with pytest.raises(ParamsError) as info:
+        config.Params.from_resolved(resolve(with_value(key, value)))
+    assert str(info.value) == f"params.yaml: {message}" or message in str(info.value)

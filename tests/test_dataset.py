@@ -4,33 +4,34 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from settings import cluster_samples, feature_config, patch_config
 from test_features import noisy_cube
 
-from refinenet.dataset import Cloud, ClusterData, PatchConfig, holdout_mask, make_inputs
-from refinenet.features import FeatureConfig, compute_features
-from refinenet.frames import to_local
-from refinenet.model import preset
+from refinenet.features.cache import compute_features
+from refinenet.geometry.frames import to_local
+from refinenet.network.dataset import PreparedCloud, holdout_mask, make_inputs
+from refinenet.network.model import preset
 
 FULL = preset("release")
 
 
-def cube_cloud(n: int, seed: int, n_clusters: int = 3, with_truth: bool = True) -> Cloud:
+def cube_cloud(n: int, seed: int, n_clusters: int = 3, with_truth: bool = True) -> PreparedCloud:
     """A noisy cube with cached features and arbitrary cluster ids (by face pair)."""
     points, normals, initial = noisy_cube(n, seed)
-    features = compute_features(points, initial, FeatureConfig())
+    features = compute_features(points, initial, feature_config())
     clusters = np.abs(normals).argmax(axis=1) % n_clusters
-    return Cloud(points, features, clusters, normals if with_truth else None)
+    return PreparedCloud(points, features, clusters, normals if with_truth else None)
 
 
 @pytest.fixture(scope="module")
-def clouds() -> list[Cloud]:
+def clouds() -> list[PreparedCloud]:
     return [cube_cloud(1200, seed=0), cube_cloud(900, seed=1)]
 
 
 def test_batch_shapes_and_local_frame(clouds):
     cloud = clouds[0]
     index = np.arange(0, 1200, 7)
-    inputs = make_inputs(cloud, index, PatchConfig(), FULL, np.random.default_rng(0))
+    inputs = make_inputs(cloud, index, patch_config(), FULL, np.random.default_rng(0))
     b = len(index)
     assert inputs.normals.shape == (b, 27) and inputs.normals.dtype == np.float32
     assert inputs.points.shape == (b, 100, 3) and inputs.points.dtype == np.float32
@@ -50,22 +51,22 @@ def test_target_sign_rule_gives_positive_z(clouds):
     its local z is n_first . e3 > 0."""
     cloud = clouds[0]
     index = np.arange(1200)
-    target = make_inputs(cloud, index, PatchConfig(), preset("release", features="normals"),
+    target = make_inputs(cloud, index, patch_config(), preset("release", features="normals"),
                          np.random.default_rng(0)).target
     assert (target[:, 2] > 0).all()
     np.testing.assert_allclose(np.linalg.norm(target, axis=1), 1.0, atol=1e-6)
 
 
 def test_unused_inputs_are_not_built(clouds):
-    inputs = make_inputs(clouds[0], np.arange(5), PatchConfig(), preset("release", features="normals"),
+    inputs = make_inputs(clouds[0], np.arange(5), patch_config(), preset("release", features="normals"),
                          np.random.default_rng(0))
     assert inputs.points is None and inputs.heights is None
-    test_cloud = Cloud(clouds[0].points, clouds[0].features, clouds[0].clusters)
-    assert make_inputs(test_cloud, np.arange(5), PatchConfig(), FULL, np.random.default_rng(0)).target is None
+    test_cloud = PreparedCloud(clouds[0].points, clouds[0].features, clouds[0].clusters)
+    assert make_inputs(test_cloud, np.arange(5), patch_config(), FULL, np.random.default_rng(0)).target is None
 
 
 def test_ball_patches_have_max_points(clouds):
-    patch = PatchConfig(mode="ball", radius=0.05, max_points=64)
+    patch = patch_config(mode="ball", radius=0.05, max_points=64)
     inputs = make_inputs(clouds[0], np.arange(10), patch, FULL, np.random.default_rng(0))
     assert inputs.points.shape == (10, 64, 3)
 
@@ -79,7 +80,7 @@ def test_holdout_mask_is_stratified_and_seeded():
 
 
 def test_split_is_disjoint_complete_and_shared_by_all_clusters(clouds):
-    per_cluster = [ClusterData(clouds, c, seed=5) for c in range(3)]
+    per_cluster = [cluster_samples(clouds, c, seed=5) for c in range(3)]
     for i, cloud in enumerate(clouds):
         val = np.zeros(len(cloud.points), dtype=bool)
         train = np.zeros(len(cloud.points), dtype=bool)
@@ -94,8 +95,8 @@ def test_split_is_disjoint_complete_and_shared_by_all_clusters(clouds):
 
 
 def test_cap_is_drawn_once(clouds):
-    capped = ClusterData(clouds, 0, seed=1, max_train_points_per_cloud=40)
-    again = ClusterData(clouds, 0, seed=1, max_train_points_per_cloud=40)
+    capped = cluster_samples(clouds, 0, seed=1, max_train_points_per_cloud=40)
+    again = cluster_samples(clouds, 0, seed=1, max_train_points_per_cloud=40)
     for i in range(2):
         assert (capped.train.cloud == i).sum() == 40 and (capped.val.cloud == i).sum() == 10
     np.testing.assert_array_equal(capped.train.point, again.train.point)
@@ -103,7 +104,7 @@ def test_cap_is_drawn_once(clouds):
 
 
 def test_batches(clouds):
-    data = ClusterData(clouds, 1, seed=0)
+    data = cluster_samples(clouds, 1, seed=0)
     n = len(data.train)
     sizes = [len(b) for b in data.batches(data.train, 64, FULL, np.random.default_rng(0), shuffle=True,
                                           drop_last=True)]
@@ -113,7 +114,7 @@ def test_batches(clouds):
     assert sum(sizes) == n and sizes[-1] == n - 64 * (n // 64)
     # One batch over both clouds = each cloud's inputs, grouped by cloud.
     (whole,) = data.batches(data.val, len(data.val), FULL, np.random.default_rng(0), shuffle=False, drop_last=False)
-    parts = [make_inputs(clouds[i], data.val.point[data.val.cloud == i], PatchConfig(), FULL,
+    parts = [make_inputs(clouds[i], data.val.point[data.val.cloud == i], patch_config(), FULL,
                          np.random.default_rng(0)) for i in range(2)]
     for name in ("normals", "points", "heights", "target"):
         np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(p, name) for p in parts]))
@@ -121,10 +122,10 @@ def test_batches(clouds):
 
 def test_errors(clouds):
     with pytest.raises(ValueError, match="ground-truth"):
-        ClusterData([Cloud(clouds[0].points, clouds[0].features, clouds[0].clusters)], 0)
+        cluster_samples([PreparedCloud(clouds[0].points, clouds[0].features, clouds[0].clusters)], 0)
     with pytest.raises(ValueError, match="val_fraction"):
-        ClusterData(clouds, 0, val_fraction=1.0)
+        cluster_samples(clouds, 0, val_fraction=1.0)
     with pytest.raises(ValueError, match="inconsistent"):
-        Cloud(clouds[0].points[:10], clouds[0].features, clouds[0].clusters)
+        PreparedCloud(clouds[0].points[:10], clouds[0].features, clouds[0].clusters)
     with pytest.raises(ValueError, match="mode"):
-        PatchConfig(mode="grid")
+        patch_config(mode="grid")

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from settings import feature_config
 
-import refinenet.features as features_module
+import refinenet.features.cache as features_module
+from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
-from refinenet.features import FeatureConfig, compute_features, load_features, save_features
-from refinenet.heightmaps import height_maps
-from refinenet.noise import bbox_diagonal
+from refinenet.features.cache import compute_features, load_features, save_features
+from refinenet.features.heightmaps import height_maps
 
 
 def noisy_cube(n: int, seed: int = 0, noise: float = 0.003) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -38,7 +39,7 @@ def cube() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("include_initial, x", [(True, 9), (False, 8)])
 def test_shapes_and_types(cube, include_initial, x):
     points, _, initial = cube
-    config = FeatureConfig(include_initial=include_initial)
+    config = feature_config(include_initial=include_initial)
     features = compute_features(points, initial, config)
     n = len(points)
     assert config.n_normals == features.n_normals == x
@@ -54,7 +55,7 @@ def test_height_chunks_and_extent_match_one_direct_call(cube, monkeypatch):
     """Heights computed in progress-bar chunks equal one height_maps call; hmp_extent is a fraction of l_d."""
     points, _, initial = cube
     monkeypatch.setattr(features_module, "HEIGHT_STEP", 400)
-    config = FeatureConfig(hmp_extent=0.05, heights_dtype="float32", hmp_size=5)
+    config = feature_config(hmp_extent=0.05, heights_dtype="float32", hmp_size=5)
     features = compute_features(points, initial, config, progress=True)
     direct = height_maps(points, features.nf, features.frames.astype(np.float64), m=5,
                          extent=0.05 * bbox_diagonal(points))
@@ -64,7 +65,7 @@ def test_height_chunks_and_extent_match_one_direct_call(cube, monkeypatch):
 
 def test_round_trip(tmp_path, cube):
     points, _, initial = cube
-    features = compute_features(points[:300], initial[:300], FeatureConfig(hmp_k=20))
+    features = compute_features(points[:300], initial[:300], feature_config(hmp_k=20))
     path = tmp_path / "cloud.features.npz"
     save_features(path, features, {"r_f": 0.03, "shape": "cube"})
     loaded, meta = load_features(path)
@@ -88,4 +89,4 @@ def test_bad_cache_file_is_an_input_error(tmp_path):
                                           ("sigma_r", ()), ("heights_dtype", "int8"), ("hmp_extent", -1.0)])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
-        FeatureConfig(**{field: value})
+        feature_config(**{field: value})

@@ -1,12 +1,12 @@
-"""Multi-scale bilateral filtering (ALGORITHM.md §3) on planes and dihedral edges with known normals."""
+"""Multi-scale bilateral filtering (docs/algorithm.md §3) on planes and dihedral edges with known normals."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from refinenet.filtering import bilateral_filter
-from refinenet.frames import target_sign
+from refinenet.features.filtering import bilateral_filter
+from refinenet.geometry.frames import target_sign
 
 UP = np.array([0.0, 0.0, 1.0])
 

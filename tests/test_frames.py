@@ -1,11 +1,11 @@
-"""Per-point frames (ALGORITHM.md §4): orthonormality, sign rules, invariances and the local/world round trip."""
+"""Per-point frames (docs/algorithm.md §4): orthonormality, sign rules, invariances and the local/world round trip."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from refinenet.frames import normal_frames, target_sign, to_local, to_world
+from refinenet.geometry.frames import normal_frames, target_sign, to_local, to_world
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

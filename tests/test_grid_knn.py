@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from refinenet import grid_knn, neighbors
-from refinenet.baselines import pca_normals
-from refinenet.metrics import unoriented_angles
+from refinenet.estimators.baselines import pca_normals
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.geometry import grid_knn, neighbors
 
 RNG = np.random.default_rng(7)
 

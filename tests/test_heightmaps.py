@@ -1,4 +1,4 @@
-"""Height maps (ALGORITHM.md §7): planes, tilted planes and spheres with analytic heights, and a loop reference.
+"""Height maps (docs/algorithm.md §7): planes, tilted planes and spheres with analytic heights, and a loop reference.
 
 Axis convention under test: bin (r, c) sits at p_i + (r - 3) h u + (c - 3) h v with u = normalize(n_f x e2),
 v = normalize(n_f x e1); for n_f = e3 of a det +1 frame that is u = -x', v = +y' (rows run along -x').
@@ -11,8 +11,8 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from refinenet.frames import normal_frames
-from refinenet.heightmaps import bin_axes, height_maps
+from refinenet.features.heightmaps import bin_axes, height_maps
+from refinenet.geometry.frames import normal_frames
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Refining a whole cloud (ALGORITHM.md §10): the frame round trip, merging across clusters, the empty-cluster
+"""Refining a whole cloud (docs/algorithm.md §10): the frame round trip, merging across clusters, the empty-cluster
 fallback, batch-size independence and loading trained networks."""
 
 from __future__ import annotations
@@ -6,15 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from settings import clustering_config, inference_config, patch_config, train_config
 from test_dataset import cube_cloud
 from torch import Tensor, nn
 
-from refinenet.clustering import assign, fit_clusters, local_normals
-from refinenet.dataset import PatchConfig
 from refinenet.errors import InputError
-from refinenet.inference import load_networks, refine_normals
-from refinenet.model import NetworkConfig, RefineNet, preset
-from refinenet.training import TrainConfig, cluster_data, cluster_dir, train_cluster
+from refinenet.network.clustering import assign, fit_clusters, local_normals
+from refinenet.network.inference import load_networks, refine_normals
+from refinenet.network.model import NetworkConfig, RefineNet, preset
+from refinenet.network.training import cluster_data, cluster_dir, train_cluster
 
 FULL = preset("release")
 
@@ -45,11 +45,13 @@ def cloud():
 
 @pytest.fixture(scope="module")
 def cluster_model(cloud):
-    return fit_clusters(local_normals(cloud.features.nf, cloud.features.frames), n_clusters=2, seed=0)
+    features = local_normals(cloud.features.nf, cloud.features.frames)
+    return fit_clusters(features, clustering_config(n_clusters=2), seed=0)
 
 
-def refine(cloud, cluster_model, networks, **kwargs) -> np.ndarray:
-    return refine_normals(cloud.points, cloud.features, cluster_model, networks, device="cpu", **kwargs)
+def refine(cloud, cluster_model, networks, device="cpu", **changes) -> np.ndarray:
+    config = inference_config(device=device, **changes)
+    return refine_normals(cloud.points, cloud.features, cluster_model, networks, patch_config(), config)
 
 
 def test_identity_network_returns_the_initial_normals(cloud, cluster_model):
@@ -87,19 +89,20 @@ def test_unknown_cluster_is_an_error(cloud, cluster_model):
 def test_load_networks(tmp_path, cloud, cluster_model):
     """Cluster 0 trained one epoch, cluster 1 empty: the loaded networks refine like the trained one, fused or not."""
     normals_only = preset("release", features="normals")
-    config = TrainConfig(batch_size=64, max_epochs=1, threads=1)
-    train_cluster(config, normals_only, cluster_data([cloud], 0, config, PatchConfig()), cluster_dir(tmp_path, 0),
+    config = train_config(batch_size=64, max_epochs=1, threads=1)
+    train_cluster(config, normals_only, cluster_data([cloud], 0, config, patch_config()), cluster_dir(tmp_path, 0),
                   progress=False)
-    train_cluster(config, normals_only, cluster_data([cloud], 7, config, PatchConfig()), cluster_dir(tmp_path, 1),
+    train_cluster(config, normals_only, cluster_data([cloud], 7, config, patch_config()), cluster_dir(tmp_path, 1),
                   progress=False)
-    plain = load_networks(tmp_path, normals_only, 2, "cpu", fuse=False)
-    fused = load_networks(tmp_path, normals_only, 2, "cpu")
+    folders = [cluster_dir(tmp_path, c) for c in range(3)]
+    plain = load_networks(folders[:2], normals_only, "cpu", fuse=False)
+    fused = load_networks(folders[:2], normals_only, "cpu")
     assert set(plain) == set(fused) == {0}
     np.testing.assert_allclose(refine(cloud, cluster_model, fused), refine(cloud, cluster_model, plain), atol=1e-5)
     with pytest.raises(InputError, match="another architecture"):
-        load_networks(tmp_path, FULL, 2, "cpu")
+        load_networks(folders[:2], FULL, "cpu")
     with pytest.raises(InputError, match="neither trained nor marked empty"):
-        load_networks(tmp_path, normals_only, 3, "cpu")
+        load_networks(folders, normals_only, "cpu")
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
@@ -107,5 +110,5 @@ def test_cuda_matches_cpu(cloud, cluster_model):
     torch.manual_seed(0)
     networks = {0: FirstNormal(), 1: RefineNet(FULL).eval()}
     cpu = refine(cloud, cluster_model, networks)
-    cuda = refine_normals(cloud.points, cloud.features, cluster_model, networks, device="cuda")
+    cuda = refine(cloud, cluster_model, networks, device="cuda")
     np.testing.assert_allclose(cuda, cpu, atol=1e-4)

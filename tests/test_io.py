@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from refinenet.errors import InputError
-from refinenet.io import (
+from refinenet.data.io import (
     Cloud,
     read_cloud,
     read_normals,
@@ -13,6 +12,7 @@ from refinenet.io import (
     write_ply,
     write_xyz_normals,
 )
+from refinenet.errors import InputError
 
 
 @pytest.fixture

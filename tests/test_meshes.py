@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from refinenet.data.meshes import MESH_SUFFIXES, mesh_area, read_mesh, sample_mesh
 from refinenet.errors import InputError
-from refinenet.meshes import MESH_SUFFIXES, mesh_area, read_mesh, sample_mesh
 
 # unit cube, vertex index 4x + 2y + z, triangles wound outward: -x, +x, -y, +y, -z, +z
 CUBE_VERTICES = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])

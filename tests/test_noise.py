@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from refinenet.noise import add_gaussian_noise, bbox_diagonal, derive_seed
+from refinenet.data.noise import add_gaussian_noise, bbox_diagonal, derive_seed
 
 
 def test_sigma_is_percent_of_bbox_diagonal():

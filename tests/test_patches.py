@@ -1,12 +1,12 @@
-"""Point patches (ALGORITHM.md §6): centring, scaling, rotation into the frame, ball subsets and padding."""
+"""Point patches (docs/algorithm.md §6): centring, scaling, rotation into the frame, ball subsets and padding."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from refinenet.frames import normal_frames, to_local
-from refinenet.patches import point_patches
+from refinenet.features.patches import point_patches
+from refinenet.geometry.frames import normal_frames, to_local
 
 
 @pytest.fixture

@@ -9,8 +9,8 @@ import pytest
 from scipy import integrate
 from scipy.spatial import cKDTree
 
-from refinenet import shapes
-from refinenet.shapes import (
+from refinenet.data import shapes
+from refinenet.data.shapes import (
     CATEGORIES,
     Parametric,
     Radial,

@@ -27,9 +27,9 @@ BAD_FILES = {
 @pytest.mark.parametrize("name", [*BAD_FILES, "few.xyz"])
 def test_baseline_stage_rejects_bad_clouds(tmp_path, name):
     path = tmp_path / name
-    path.write_text(BAD_FILES.get(name, "\n".join(f"{i} {i * i} 0" for i in range(20))))
+    path.write_text(BAD_FILES.get(name, "\n".join(f"{i} {i * i} 0" for i in range(50))))  # K = 100 in params
     out = tmp_path / "out.npy"
-    run = stage("baseline_normals", "--method", "pca", "--cloud", str(path), "--k", "50", "--out", str(out))
+    run = stage("baselines", "--method", "pca", "--cloud", str(path), "--out", str(out))
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}:"), run.stderr
@@ -40,7 +40,7 @@ def test_baseline_stage_writes_normals(tmp_path):
     rng = np.random.default_rng(0)
     points = np.c_[rng.uniform(size=(500, 2)), np.zeros(500)]
     np.savetxt(tmp_path / "plane.xyz", points)
-    run = stage("baseline_normals", "--method", "jet", "--cloud", str(tmp_path / "plane.xyz"), "--k", "20",
+    run = stage("baselines", "--method", "jet", "--cloud", str(tmp_path / "plane.xyz"),
                 "--out", str(tmp_path / "plane.normals"))
     assert run.returncode == 0, run.stderr
     normals = np.loadtxt(tmp_path / "plane.normals")
@@ -48,8 +48,20 @@ def test_baseline_stage_writes_normals(tmp_path):
 
 
 def test_cloud_stage_rejects_missing_mesh(tmp_path):
+    (tmp_path / "meshes/test/sharp").mkdir(parents=True)
+    (tmp_path / "meshes/test/sharp/m.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+    params = tmp_path / "params.yaml"
+    params.write_text((REPO / "params.yaml").read_text().replace("source: procedural", "source: meshes", 1)
+                      .replace("path: null", f"path: {tmp_path / 'meshes'}", 1))
     out = tmp_path / "c.npz"
-    run = stage("cloud", "--split", "test", "--category", "SharpFeature", "--name", "m",
-                "--origin", str(tmp_path / "missing.off"), "--noise", "0.1", "--n-points", "1000",
-                "--seed", "1", "--out", str(out))
-    assert run.returncode == 2 and "missing.off" in run.stderr and not out.exists()
+    run = stage("clouds", "--params", str(params), "--cloud", "test/SharpFeature/m_n0.10", "--out", str(out))
+    assert run.returncode == 2 and "m.off" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_every_stage_names_the_bad_params_key(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text((REPO / "params.yaml").read_text().replace("  pca_k: 100", "  pca_k: -5", 1))
+    run = stage("baselines", "--params", str(params), "--method", "pca", "--cloud", "x.xyz", "--out", "x.npy")
+    assert run.returncode == 2
+    assert run.stderr.strip() == f"error: {params}: baselines.pca_k: -5 is less than the minimum of 3"

@@ -1,5 +1,5 @@
-"""Training one cluster (ALGORITHM.md §9): learning, bit-identical resumption after a kill, history, early stopping,
-empty clusters and the settings check on resumption."""
+"""Training one cluster (docs/algorithm.md §9): learning, bit-identical resumption after a kill, history, early
+stopping, empty clusters and the settings check on resumption."""
 
 from __future__ import annotations
 
@@ -9,18 +9,17 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from settings import patch_config, train_config
 from test_dataset import cube_cloud
 
-import refinenet.training as training
-from refinenet.dataset import PatchConfig
-from refinenet.model import preset
-from refinenet.training import (
+import refinenet.network.training as training
+from refinenet.network.model import preset
+from refinenet.network.training import (
     BEST,
     CHECKPOINT,
     EMPTY,
     HISTORY,
     HISTORY_COLUMNS,
-    TrainConfig,
     cluster_data,
     train_cluster,
 )
@@ -35,8 +34,8 @@ def clouds():
 
 def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
     """The target is the first local normal up to noise-free sign: a small network learns it within 3 epochs."""
-    config = TrainConfig(optimizer="adam", lr=1e-3, batch_size=64, max_epochs=3, seed=1, threads=1)
-    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False)
+    config = train_config(optimizer="adam", lr=1e-3, batch_size=64, max_epochs=3, seed=1, threads=1)
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path, False)
     history = pd.read_csv(tmp_path / HISTORY)
     assert list(history.columns) == list(HISTORY_COLUMNS)
     assert history["epoch"].tolist() == [1, 2, 3]
@@ -50,9 +49,9 @@ def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
 def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
     """The full network (dropout, BN, patches, heights) for 3 epochs, against 2 epochs, a kill inside epoch 3 (after
     its optimiser steps), and a resumption."""
-    config = TrainConfig(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1)
+    config = train_config(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1)
     full = preset("release")
-    data = cluster_data(clouds[1:], 0, config, PatchConfig())
+    data = cluster_data(clouds[1:], 0, config, patch_config())
     train_cluster(config, full, data, tmp_path / "straight", progress=False)
 
     validate, calls = training._validate, []
@@ -85,17 +84,17 @@ def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
 
 def test_early_stopping(tmp_path, clouds, monkeypatch):
     monkeypatch.setattr(training, "_validate", lambda *args, **kwargs: np.full(10, 3.0))
-    config = TrainConfig(batch_size=128, max_epochs=50, patience=2, threads=1)
-    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False)
+    config = train_config(batch_size=128, max_epochs=50, patience=2, threads=1)
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path, False)
     assert (result.epochs, result.best_epoch, result.stopped_early) == (3, 1, True)
     # A finished run resumes to the same result without training.
-    assert train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False) \
+    assert train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path, False) \
         == result
 
 
 def test_empty_cluster_writes_a_marker(tmp_path, clouds):
-    config = TrainConfig()
-    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 3, config, PatchConfig()), tmp_path, False)
+    config = train_config()
+    result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 3, config, patch_config()), tmp_path, False)
     assert result.empty and result.epochs == 0
     assert json.loads((tmp_path / EMPTY).read_text()) == {"cluster": 3, "train_points": 0, "val_points": 0}
     assert not (tmp_path / BEST).exists()
@@ -103,14 +102,14 @@ def test_empty_cluster_writes_a_marker(tmp_path, clouds):
 
 def test_other_settings_start_over(tmp_path, clouds):
     """A checkpoint of other settings is not resumed: training restarts from epoch 1, as a fresh run would."""
-    config = TrainConfig(batch_size=128, max_epochs=1, threads=1)
-    train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, PatchConfig()), tmp_path, False,
+    config = train_config(batch_size=128, max_epochs=1, threads=1)
+    train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path, False,
                   checkpoint_dir=tmp_path / "ckpt")
     assert (tmp_path / "ckpt" / "checkpoint.pt").exists() and not (tmp_path / "checkpoint.pt").exists()
-    changed = TrainConfig(batch_size=128, max_epochs=2, lr=1e-3, threads=1)
-    resumed = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, PatchConfig()),
+    changed = train_config(batch_size=128, max_epochs=2, lr=1e-3, threads=1)
+    resumed = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, patch_config()),
                             tmp_path, False, checkpoint_dir=tmp_path / "ckpt")
-    fresh = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, PatchConfig()),
+    fresh = train_cluster(changed, NORMALS_ONLY, cluster_data(clouds, 0, changed, patch_config()),
                           tmp_path / "fresh", False)
     assert resumed.epochs == fresh.epochs == 2
     assert resumed.best_val_rmse_deg == fresh.best_val_rmse_deg
@@ -120,4 +119,4 @@ def test_other_settings_start_over(tmp_path, clouds):
                                           ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0)])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
-        TrainConfig(**{field: value})
+        train_config(**{field: value})

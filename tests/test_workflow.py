@@ -1,44 +1,50 @@
 """Snakemake and DVC describe the same pipeline: generated dvc.yaml is current, rules and code match."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import yaml
 
-from refinenet import workflow
+from refinenet.pipeline import workflow
 
 REPO = Path(__file__).resolve().parents[1]
+#: The floors of the library, bottom to top: a module may import only from its own floor and those below.
+FLOORS = ("config", "data", "geometry", "estimators", "features", "evaluation", "network", "pipeline")
+PACKAGES = {"data", "geometry", "estimators", "features", "evaluation", "network", "pipeline"}
 
 
 def test_dvc_yaml_is_generated_from_the_step_declarations():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    assert (REPO / "dvc.yaml").read_text() == workflow.render_dvc_yaml(raw), "run `python -m refinenet.workflow`"
+    assert (REPO / "dvc.yaml").read_text() == workflow.render_dvc_yaml(raw), "run python -m refinenet.pipeline.workflow"
 
 
 def test_dvc_stages_list_profile_overrides_of_their_keys():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    keys = workflow.tracked_keys(raw, workflow.STEPS["test_clouds"])
+    keys = workflow.tracked_keys(raw, workflow.STEPS["clouds_test"])
     assert {"profile", "data", "profiles.smoke.data", "profiles.cpu.data"} <= set(keys)
     assert "profiles.smoke.data" not in workflow.tracked_keys(raw, workflow.STEPS["baselines"])
 
 
-def test_every_step_has_a_snakemake_rule():
+def test_every_step_is_one_snakemake_rule_of_the_same_name():
     listed = subprocess.run([sys.executable, "-m", "snakemake", "--list-rules"], cwd=REPO,
                             capture_output=True, text=True, check=True).stdout.split()
-    assert {s.rule for s in workflow.STEPS.values()} <= set(listed)
+    assert set(listed) == {*workflow.STEPS, "all"}
+    for step in workflow.STEPS.values():
+        assert step.family in step.name.split("_") or step.name.startswith(f"{step.family}_"), step.name
 
 
 def test_steps_declare_every_library_module_their_script_imports():
     """A module missing from a step's code deps would let a code change go unnoticed by both tools."""
     for step in workflow.STEPS.values():
-        module = step.script.removesuffix(".py").replace("/", ".")
+        module = f"stages.{step.family}"
         probe = (f"import importlib, json, sys; importlib.import_module('{module}'); "
                  "print(json.dumps(sorted(m for m in sys.modules if m.startswith('refinenet.'))))")
         out = subprocess.run([sys.executable, "-c", probe], cwd=REPO, capture_output=True, text=True, check=True)
-        imported = {m.removeprefix("refinenet.") for m in json.loads(out.stdout)}
-        assert imported <= set(step.modules), f"{step.stage}: undeclared {imported - set(step.modules)}"
+        imported = {m.removeprefix("refinenet.") for m in json.loads(out.stdout)} - PACKAGES
+        assert imported <= set(step.modules), f"{step.name}: undeclared {imported - set(step.modules)}"
         for path in step.code:
             assert (REPO / path).is_file(), path
 
@@ -46,3 +52,34 @@ def test_steps_declare_every_library_module_their_script_imports():
 def test_snakemake_lint_is_clean():
     lint = subprocess.run([sys.executable, "-m", "snakemake", "--lint"], cwd=REPO, capture_output=True, text=True)
     assert lint.returncode == 0 and "Congratulations" in lint.stdout + lint.stderr, lint.stderr[-3000:]
+
+
+def floor(module: str) -> int:
+    top = module.split(".")[0]
+    return 0 if top in ("config", "errors", "atomic") else FLOORS.index(top)
+
+
+def test_no_module_imports_a_higher_floor():
+    """Data flows one way: e.g. the estimators never import the network, the network never the pipeline."""
+    pattern = re.compile(r"^\s*from refinenet\.([\w.]+) import|^\s*import refinenet\.([\w.]+)", re.M)
+    for path in (REPO / "src/refinenet").rglob("*.py"):
+        module = ".".join(path.relative_to(REPO / "src/refinenet").with_suffix("").parts)
+        if module == "__init__" or module.endswith("__init__"):
+            continue
+        for match in pattern.finditer(path.read_text()):
+            imported = match.group(1) or match.group(2)
+            assert floor(imported) <= floor(module), f"{module} imports the higher floor {imported}"
+
+
+def test_each_job_command_names_its_own_method_and_table(tmp_path):
+    """Rules defined in a loop format their command when the job runs: a loop variable used there would name the
+    last method or table for every job. Checked on the dry run's printed commands."""
+    dry = subprocess.run([sys.executable, "-m", "snakemake", "-n", "-p", "--forceall"], cwd=REPO, capture_output=True,
+                         text=True, check=True).stdout
+    commands = [line for line in dry.splitlines() if "python -m stages." in line]
+    normals = re.compile(r"--method (\w+) .*--out results/normals/(\w+)/")
+    tables = re.compile(r"stages\.table --table (\w+)")
+    methods = [normals.search(c).groups() for c in commands if "--method" in c]
+    assert {m for m, _ in methods} == {"pca", "jet", "mfps", "simple_mfps"}
+    assert all(method == folder for method, folder in methods)
+    assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(workflow.TABLES)

@@ -1,23 +1,393 @@
-"""Loading params.yaml: apply the selected profile's overrides, then validate against the schema.
+"""The one typed configuration: every block of params.yaml as a dataclass, composed into `Params`.
 
-Errors name the dotted key and the problem in one line, e.g.
-`params.yaml: baselines.pca_k: -3 is less than the minimum of 3`.
+params.yaml is the only place that holds the values: no field here has a default (the few constants of a method
+that params.yaml does not expose keep theirs, and the per-job seed and thread count are not params). Loading
+applies the active profile, checks every value against the schema beside this module, which names the dotted
+key of the first bad one in a one-line error (`params.yaml: baselines.pca_k: -3 is less than the minimum of 3`),
+then builds the blocks, whose own checks catch what a schema cannot (e.g. an even height-map size).
+
+This module sits on the lowest floor with `errors` and `atomic`: each library floor imports its block from
+here, and a stage script loads `Params` without importing the floors it does not use.
 """
 
 from __future__ import annotations
 
 import copy
+import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import jsonschema
 import yaml
 
 from refinenet.errors import ParamsError
 
-SCHEMA = Path("workflow/schemas/params.schema.yaml")
+SCHEMA = Path(__file__).with_name("params.schema.yaml")
 #: Mappings whose keys are data (categories, list names), replaced whole by an override.
 OPEN_MAPPINGS = frozenset({"test_lists", "test"})
+LOSSES = ("mse", "l1")
+
+@dataclass(frozen=True)
+class PCPNetLists:
+    """The list files of a PCPNet-format folder (`data.pcpnet`)."""
+
+    train_list: str | None
+    """Names of the training shapes; null: no training clouds (test only)."""
+    test_lists: dict[str, str]
+    """Table column -> list file; one test category per column."""
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """Where a run's clouds come from (params.yaml `data`; README "Your own data")."""
+
+    source: str
+    """procedural | meshes | pcpnet | points."""
+    path: str | None
+    """Folder of the meshes, pcpnet and points sources."""
+    split_folders: dict[str, str]
+    """Sub-folder of `path` holding each split (meshes, points)."""
+    n_points: int
+    """Points sampled per shape or mesh (synthesised sources)."""
+    max_shapes: int | None
+    """At most this many shapes per split and category; None: all."""
+    pcpnet: PCPNetLists
+
+    def __post_init__(self) -> None:
+        if isinstance(self.pcpnet, dict):
+            object.__setattr__(self, "pcpnet", PCPNetLists(**self.pcpnet))
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Gaussian noise levels in percent of l_d (params.yaml `noise`, docs/algorithm.md §1.2)."""
+
+    train: tuple[float, ...]
+    """Levels of every training shape."""
+    test: dict[str, tuple[float, ...]]
+    """Levels of the test shapes, per category."""
+
+    def levels(self, split: str, category: str) -> list[float]:
+        if split == "train":
+            return list(self.train)
+        if category not in self.test:
+            raise ParamsError(f"noise.test.{category}", "no test noise levels given for this category")
+        return list(self.test[category])
+
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    """The baselines' settings in the paper's tables (params.yaml `baselines`)."""
+
+    pca_k: int
+    """PCA neighbourhood size K."""
+    jet_k: int
+    """Jet neighbourhood size K."""
+    jet_degree: int
+    """Degree of the fitted jet."""
+    big_noise_k: int
+    """K of both methods on BigNoise clouds: the paper uses 200 there, 100 elsewhere."""
+
+
+
+@dataclass(frozen=True)
+class MFPSConfig:
+    """Parameters of MFPS (docs/algorithm.md §2, table A.7): the first five are params.yaml `mfps`; the rest are
+    constants of the method with their released values."""
+
+    scales: tuple[int, ...]
+    """K: patch sizes in points (kNN including the centre). min(K) = k0 is also the PCA, bandwidth and
+    orientation neighbourhood; [P] uses {50, 100, 150} for synthetic data, [C] {50, 100} for PCPNet."""
+    trials: int
+    """R: random planes per patch, each through the centre and 3 distinct random neighbours ([C])."""
+    theta_t: float
+    """Anisotropic angle in degrees between members of the fitting set A ([P] 60, [C] 45)."""
+    a_max: int
+    """Maximum size of the anisotropic set A ([C] 2, [P] unbounded)."""
+    eta: Literal["code", "paper"]
+    """Scale weight eta(k): "code" = exp(-((1 - k/k_max)/3)^2) as released, "paper" = linear from beta to 1."""
+    beta: float = 0.9
+    """Smallest weight of the paper's linear eta."""
+    hist_bins: int = 50
+    """Bins of the surface-variation histogram on [0, 1)."""
+    tv_lambda: float = 0.5
+    """Weight of the L1 trend filter that smooths the histogram."""
+    flat_tol: float = 0.05
+    """Knee rule: the filtered histogram has flattened when x[b-1] - x[b+1] is below this."""
+    drop_tol: float = 0.05
+    """Knee rule: the threshold bin must lie this far below the peak."""
+    simple: bool = False
+    """"Simple MFPS" ablation ([P] §Ablation): the highest-scoring patch, no anisotropic selection."""
+    seed: int = 0
+    """Seed of the random trials; the same seed gives bit-identical normals."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "scales", tuple(int(k) for k in self.scales))
+        _require(len(self.scales) > 0, "scales", "needs at least one scale")
+        _require(all(k >= 4 for k in self.scales), "scales",
+                 f"each scale needs the centre plus 3 distinct neighbours (k >= 4), got {self.scales}")
+        _require(list(self.scales) == sorted(set(self.scales)), "scales",
+                 f"must be distinct and increasing, got {self.scales}")
+        _require(self.trials >= 1, "trials", f"must be >= 1, got {self.trials}")
+        _require(0.0 < self.theta_t <= 90.0, "theta_t", f"must be in (0, 90] degrees, got {self.theta_t}")
+        _require(self.a_max >= 1, "a_max", f"must be >= 1, got {self.a_max}")
+        _require(self.eta in ("code", "paper"), "eta", f"must be 'code' or 'paper', got {self.eta!r}")
+        _require(0.0 <= self.beta <= 1.0, "beta", f"must be in [0, 1], got {self.beta}")
+        _require(self.hist_bins >= 3, "hist_bins", f"must be >= 3, got {self.hist_bins}")
+        for name in ("tv_lambda", "flat_tol", "drop_tol"):
+            value = getattr(self, name)
+            _require(math.isfinite(value) and value >= 0, name, f"must be finite and >= 0, got {value}")
+        _require(0 <= self.seed < 2**63, "seed", f"must be in [0, 2^63), got {self.seed}")
+
+    @property
+    def k0(self) -> int:
+        """Neighbourhood of PCA, surface variation, bandwidth and orientation: min(K)."""
+        return self.scales[0]
+
+    @property
+    def k_bw(self) -> int:
+        """Neighbourhood over which residuals are averaged into the bandwidth: 1.5 max(K), rounded down."""
+        return 3 * self.scales[-1] // 2
+
+
+def _require(ok: bool, field: str, problem: str) -> None:
+    if not ok:
+        raise ValueError(f"MFPSConfig.{field}: {problem}")
+
+
+FRAME_MODES = ("canonical", "faithful")
+
+
+HEIGHT_DTYPES = ("float16", "float32")
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Everything that fixes a cloud's cached features (params.yaml `features`)."""
+
+    r_f: float
+    """Filter ball radius as a fraction of l_d: 0.03 code profile, 0.05 paper profile (§3)."""
+    sigma_s: tuple[float, ...]
+    """Spatial scales in units of R_f / 2 (outer loop of the filtered normals)."""
+    sigma_r: tuple[float, ...]
+    """Range scales (inner loop of the filtered normals)."""
+    include_initial: bool
+    """Keep the initial normal as the first of the X normals: X = 9 (synthetic, PCPNet); False: X = 8 (real scans)."""
+    frame_mode: str
+    """Sign convention of the per-point frames (§4): canonical (det +1, recommended) or faithful (the release's)."""
+    hmp_size: int
+    """m, the side of each height map."""
+    hmp_k: int
+    """The height-map half-extent is the distance to the k-th nearest neighbour (code profile)."""
+    hmp_extent: float | None
+    """Absolute height-map half-extent as a fraction of l_d (the paper profile's ball radius, e.g. 0.05); replaces
+    hmp_k when set."""
+    heights_dtype: str
+    """Storage type of the height maps: float16 halves the cache (heights lie within +-0.3 in units of the extent,
+    so the rounding error is at most 1.2e-4); float32 keeps them exact."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
+        object.__setattr__(self, "sigma_r", tuple(float(s) for s in self.sigma_r))
+        if not self.r_f > 0:
+            raise ValueError(f"r_f must be positive, got {self.r_f}")
+        for name in ("sigma_s", "sigma_r"):
+            values = getattr(self, name)
+            if not values or any(not s > 0 for s in values):
+                raise ValueError(f"{name} must be a non-empty sequence of positive numbers, got {values}")
+        if self.frame_mode not in FRAME_MODES:
+            raise ValueError(f"frame_mode '{self.frame_mode}' is not one of {FRAME_MODES}")
+        if self.hmp_size < 1 or self.hmp_size % 2 == 0:
+            raise ValueError(f"hmp_size must be a positive odd number (a centre bin), got {self.hmp_size}")
+        if self.hmp_k < 1:
+            raise ValueError(f"hmp_k must be at least 1, got {self.hmp_k}")
+        if self.hmp_extent is not None and not self.hmp_extent > 0:
+            raise ValueError(f"hmp_extent must be positive or None, got {self.hmp_extent}")
+        if self.heights_dtype not in HEIGHT_DTYPES:
+            raise ValueError(f"heights_dtype '{self.heights_dtype}' is not one of {HEIGHT_DTYPES}")
+
+    @property
+    def n_normals(self) -> int:
+        """X, the normals per point."""
+        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial)
+
+
+@dataclass(frozen=True)
+class ClusteringConfig:
+    """params.yaml `clustering`."""
+
+    n_clusters: int
+    """Kc, the number of clusters and so of networks."""
+    restarts: int
+    """k-means runs from different k-means++ seeds; the best (lowest within-cluster sum of squares) is kept."""
+    max_samples: int | None
+    """Training points (a seeded subset) used to fit PCA and k-means; None: all."""
+
+
+@dataclass(frozen=True)
+class NetworkParams:
+    """params.yaml `network`: a preset and the two ablation choices. The input sizes are not set here: X and m
+    come from the features block and the patch size from the patches block (`network.model.architecture`), so
+    they always agree."""
+
+    preset: str
+    """release ([C] sizes) or paper ([P] sizes)."""
+    features: str
+    """Feature modules: full, normals, normals_points, normals_hmps."""
+    connection: str
+    """How a feature module refines a normal: weight, rot, trans, concat, residual."""
+
+
+PATCH_MODES = ("knn", "ball")
+
+
+@dataclass(frozen=True)
+class PatchConfig:
+    """The point-module neighbourhood (docs/algorithm.md §6; params.yaml `patches`)."""
+
+    mode: str
+    """knn (the release's, code profile) or ball (the paper's: random subset of a ball, padded with the centre)."""
+    k: int
+    """Neighbours per knn patch, self included; the patch is scaled by the distance to the k-th."""
+    radius: float
+    """Ball radius as a fraction of l_d (ball mode): 0.05 synthetic and PCPNet, 0.03 real scans."""
+    max_points: int
+    """Points per ball patch (ball mode): 300 synthetic and PCPNet, 500 real scans."""
+
+    def __post_init__(self) -> None:
+        if self.mode not in PATCH_MODES:
+            raise ValueError(f"mode '{self.mode}' is not one of {PATCH_MODES}")
+        if self.k < 1:
+            raise ValueError(f"k must be at least 1, got {self.k}")
+        if not self.radius > 0:
+            raise ValueError(f"radius must be positive, got {self.radius}")
+        if self.max_points < 1:
+            raise ValueError(f"max_points must be at least 1, got {self.max_points}")
+
+    @property
+    def size(self) -> int:
+        """Points per patch the network receives: k (knn) or max_points (ball, padded with the centre)."""
+        return self.k if self.mode == "knn" else self.max_points
+
+
+OPTIMIZERS = ("sgd", "adam")
+
+
+DEVICES = ("auto", "cpu", "cuda")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation settings (docs/algorithm.md §9; params.yaml `training`), plus the per-job seed and threads."""
+
+    optimizer: str
+    """sgd (§9, with `momentum`) or adam (an option for short CPU profiles, typically with lr 1e-3)."""
+    lr: float
+    """Learning rate, constant (no decay in [P] or [C])."""
+    momentum: float
+    """SGD momentum (unused by adam)."""
+    weight_decay: float
+    """L2 penalty on all parameters, biases and BN included, as [C] applies it."""
+    batch_size: int
+    """Training and validation batch size; the last incomplete training batch is dropped (no BN on 1 sample).
+    A cluster with fewer training points trains on one batch of all of them."""
+    max_epochs: int
+    """Upper bound on the epochs."""
+    patience: int
+    """Stop when the validation RMSE has not improved for this many epochs."""
+    loss: str
+    """mse (elementwise, [C]) or l1 (the loss ablation)."""
+    val_fraction: float
+    """Share of each cloud's points held out for validation, stratified by cluster ([P], §1.4)."""
+    max_train_points_per_cloud: int | None
+    """Random subset (drawn once) of each cloud's training points of the cluster, for CPU profiles; None: all."""
+    device: str
+    """auto (cuda when available), cpu or cuda."""
+    seed: int = 0
+    """Seeds the initial weights, the validation split, the point caps, shuffling, patches and dropout."""
+    threads: int | None = None
+    """torch CPU threads; None leaves torch's default."""
+
+    def __post_init__(self) -> None:
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer '{self.optimizer}' is not one of {OPTIMIZERS}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss '{self.loss}' is not one of {tuple(LOSSES)}")
+        if self.device not in DEVICES:
+            raise ValueError(f"device '{self.device}' is not one of {DEVICES}")
+        if not self.lr > 0:
+            raise ValueError(f"lr must be positive, got {self.lr}")
+        for name in ("momentum", "weight_decay"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be non-negative, got {getattr(self, name)}")
+        for name in ("batch_size", "max_epochs", "patience"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.threads is not None and self.threads < 1:
+            raise ValueError(f"threads must be at least 1 or None, got {self.threads}")
+        if not 0.0 < self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+        if self.max_train_points_per_cloud is not None and self.max_train_points_per_cloud < 1:
+            raise ValueError(f"max_train_points_per_cloud must be at least 1 or None, "
+                             f"got {self.max_train_points_per_cloud}")
+
+
+@dataclass(frozen=True)
+class InferenceConfig:
+    """params.yaml `inference`."""
+
+    batch_size: int
+    """Points per network call; bounds the memory of the patches and height maps built for a batch."""
+    device: str
+    """auto (cuda when torch sees a GPU), cpu or cuda."""
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """params.yaml `evaluation`."""
+
+    protocol: str
+    """synthetic: pool the points of a category's clouds; pcpnet: the `.pidx` subset of each cloud, then the mean
+    of the per-cloud values."""
+
+
+@dataclass(frozen=True)
+class Params:
+    """Every setting of a run, one block per section of params.yaml (each documented in its dataclass)."""
+
+    profile: str
+    seed: int
+    """The global seed; every job derives its own from it and the job's name (`data.noise.derive_seed`)."""
+    data: DataConfig
+    noise: NoiseConfig
+    baselines: BaselineConfig
+    mfps: MFPSConfig
+    features: FeatureConfig
+    clustering: ClusteringConfig
+    network: NetworkParams
+    patches: PatchConfig
+    training: TrainConfig
+    inference: InferenceConfig
+    evaluation: EvaluationConfig
+
+    @classmethod
+    def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> Params:
+        """Typed blocks from validated, resolved params; a value the schema cannot judge (e.g. an even height-map
+        size) is reported under its block's key."""
+        blocks = {"data": DataConfig, "baselines": BaselineConfig, "mfps": MFPSConfig, "features": FeatureConfig,
+                  "clustering": ClusteringConfig, "network": NetworkParams, "patches": PatchConfig,
+                  "training": TrainConfig, "inference": InferenceConfig, "evaluation": EvaluationConfig}
+        typed: dict[str, Any] = {}
+        for key, block in blocks.items():
+            try:
+                typed[key] = block(**params[key])
+            except (TypeError, ValueError) as err:
+                raise ParamsError(key, str(err), source) from None
+        noise = params["noise"]
+        typed["noise"] = NoiseConfig(train=tuple(noise["train"]),
+                                     test={c: tuple(levels) for c, levels in noise["test"].items()})
+        return cls(profile=params["profile"], seed=params["seed"], **typed)
 
 
 def deep_merge(base: dict[str, Any], override: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -42,8 +412,9 @@ def get(params: dict[str, Any], dotted: str) -> Any:
     return value
 
 
-def resolve(raw: dict[str, Any], source: str = "params.yaml", schema: Path = SCHEMA) -> dict[str, Any]:
-    """Validated parameters with the active profile's overrides applied."""
+def resolve(raw: dict[str, Any], source: str = "params.yaml", apply_profile: bool = True) -> dict[str, Any]:
+    """Validated parameters with the active profile's overrides applied (or, with `apply_profile` False, the
+    file's own values: what the tests and benchmarks use as the library's settings)."""
     if not isinstance(raw, dict):
         raise ParamsError("(top level)", "expected a mapping of keys to values", source)
     profile = raw.get("profile")
@@ -51,18 +422,18 @@ def resolve(raw: dict[str, Any], source: str = "params.yaml", schema: Path = SCH
     if profile not in profiles:
         raise ParamsError("profile", f"'{profile}' is not one of the profiles {sorted(profiles)}", source)
     try:
-        resolved = deep_merge(raw, {**profiles[profile], "profile": profile}, "")
+        resolved = deep_merge(raw, {**profiles[profile], "profile": profile} if apply_profile else {}, "")
         for name, block in profiles.items():
             deep_merge(raw, block, f"profiles.{name}.")
     except ParamsError as err:
         raise ParamsError(err.key, err.problem, source) from None
-    validate(resolved, source, schema)
+    validate(resolved, source)
     return resolved
 
 
-def validate(params: dict[str, Any], source: str = "params.yaml", schema: Path = SCHEMA) -> None:
+def validate(params: dict[str, Any], source: str = "params.yaml") -> None:
     """Check every value against the JSON schema; report the first problem with its dotted key."""
-    spec = yaml.safe_load(Path(schema).read_text())
+    spec = yaml.safe_load(SCHEMA.read_text())
     errors = sorted(jsonschema.Draft202012Validator(spec).iter_errors(params), key=lambda e: list(e.path))
     if errors:
         err = errors[0]
@@ -70,11 +441,15 @@ def validate(params: dict[str, Any], source: str = "params.yaml", schema: Path =
         raise ParamsError(key, err.message, source)
 
 
-def load(path: str | Path = "params.yaml", schema: Path = SCHEMA) -> dict[str, Any]:
-    """Read, resolve and validate a params file."""
+def read_raw(path: str | Path = "params.yaml") -> dict[str, Any]:
+    """The file as written, for the keys that Snakemake and DVC track."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as err:
         raise ParamsError("(file)", f"cannot be read as YAML ({str(err).splitlines()[0]})", str(path)) from None
-    return resolve(raw, str(path), schema)
+
+
+def load(path: str | Path = "params.yaml", apply_profile: bool = True) -> Params:
+    """Read, resolve and validate a params file into `Params`."""
+    return Params.from_resolved(resolve(read_raw(path), str(path), apply_profile), str(path))

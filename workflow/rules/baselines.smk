@@ -1,27 +1,25 @@
-# Classical baselines of the paper's tables: PCA and Jet, K = 100 (K = 200 for BigNoise).
+# Classical baselines of the paper's tables: PCA and Jet (K = 100; K = 200 for BigNoise).
 
 
-rule baseline_normals:
+rule baselines:
     message:
-        "{wildcards.method} normals of {wildcards.split}/{wildcards.category}/{wildcards.name}"
+        "{wildcards.method} normals of {wildcards.cloud}"
     input:
         code=wf.STEPS["baselines"].code,
-        cloud="results/clouds/{split}/{category}/{name}.npz",
+        cloud=wf.CLOUD,
     output:
-        "results/normals/{method}/{split}/{category}/{name}.npy",
+        wf.NORMALS,
     wildcard_constraints:
         method="|".join(wf.BASELINES),
     params:
         tracked=tracked("baselines"),
-        k=baseline_k,
-        degree=P["baselines"]["jet_degree"],
     log:
-        "logs/baseline_normals/{method}/{split}/{category}/{name}.log",
+        "logs/baselines/{method}/{cloud}.log",
     benchmark:
-        "logs/baseline_normals/{method}/{split}/{category}/{name}.benchmark.tsv"
+        "logs/baselines/{method}/{cloud}.benchmark.tsv"
     threads: 1
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.baseline_normals --method {wildcards.method} --cloud {input.cloud}"
-        " --k {params.k} --degree {params.degree} --out {output} --threads {threads} 2>&1 | tee {log}"
+        "python -m stages.baselines --method {wildcards.method} --cloud {input.cloud} --out {output}"
+        " --threads {threads} 2>&1 | tee {log}"

@@ -1,27 +1,21 @@
-# Normal-based clustering (ALGORITHM.md §5), fitted on the training clouds only.
+# Normal-based clustering (docs/algorithm.md §5), fitted on the training clouds only.
 
 
-rule clusters:
+rule clustering:
     message:
-        "cluster model (Kc = {params.n_clusters}) from the training clouds"
+        "cluster model (Kc = {P.clustering.n_clusters}) from the training clouds"
     input:
-        code=wf.STEPS["clusters"].code,
-        features=[wf.features_path(c) for c in TRAIN_SPECS],
+        code=wf.STEPS["clustering"].code,
+        features=[wf.FEATURES.format(cloud=key) for key in TRAIN_KEYS],
     output:
         wf.CLUSTER_MODEL,
     params:
-        tracked=tracked("clusters"),
-        n_clusters=P["clustering"]["n_clusters"],
-        restarts=P["clustering"]["restarts"],
-        max_samples=P["clustering"]["max_samples"],
-        seed=derive_seed(P["seed"], "clusters"),
+        tracked=tracked("clustering"),
     log:
-        "logs/clusters.log",
+        "logs/clustering.log",
     benchmark:
-        "logs/clusters.benchmark.tsv"
+        "logs/clustering.benchmark.tsv"
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.clusters --features {input.features} --n-clusters {params.n_clusters}"
-        " --restarts {params.restarts} --max-samples {params.max_samples} --seed {params.seed}"
-        " --out {output} 2>&1 | tee {log}"
+        "python -m stages.clustering --features {input.features} --out {output} 2>&1 | tee {log}"

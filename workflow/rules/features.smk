@@ -1,25 +1,24 @@
-# Feature cache per cloud: multi-scale filtered normals, per-point frames, height maps (ALGORITHM.md §3, §4, §7).
+# Feature cache per cloud: multi-scale filtered normals, per-point frames, height maps (docs/algorithm.md §3, §4, §7).
 
 
 rule features:
     message:
-        "features of {wildcards.split}/{wildcards.category}/{wildcards.name}"
+        "features of {wildcards.cloud}"
     input:
         code=wf.STEPS["features"].code,
-        cloud="results/clouds/{split}/{category}/{name}.npz",
-        initial="results/normals/mfps/{split}/{category}/{name}.npy",
+        cloud=wf.CLOUD,
+        initial=wf.normals_path("mfps", "{cloud}"),
     output:
-        "results/features/{split}/{category}/{name}.npz",
+        wf.FEATURES,
     params:
         tracked=tracked("features"),
-        config=json.dumps(P["features"]),
     log:
-        "logs/features/{split}/{category}/{name}.log",
+        "logs/features/{cloud}.log",
     benchmark:
-        "logs/features/{split}/{category}/{name}.benchmark.tsv"
+        "logs/features/{cloud}.benchmark.tsv"
     threads: 1
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.features --cloud {input.cloud} --initial {input.initial} --config {params.config:q}"
-        " --progress --out {output} --threads {threads} 2>&1 | tee {log}"
+        "python -m stages.features --cloud {input.cloud} --initial {input.initial} --out {output}"
+        " --threads {threads} 2>&1 | tee {log}"

@@ -1,33 +1,26 @@
-# Refine-Net normals of every test cloud, merged across clusters, in the PCPNet format (ALGORITHM.md §10).
+# Refine-Net normals of every test cloud, merged across clusters, in the PCPNet format (docs/algorithm.md §10).
 
 
-rule refine:
+rule inference:
     message:
-        "Refine-Net normals of {wildcards.split}/{wildcards.category}/{wildcards.name}"
+        "Refine-Net normals of {wildcards.cloud}"
     input:
-        code=wf.STEPS["refine"].code,
-        cloud="results/clouds/{split}/{category}/{name}.npz",
-        features="results/features/{split}/{category}/{name}.npz",
+        code=wf.STEPS["inference"].code,
+        cloud=wf.CLOUD,
+        features=wf.FEATURES,
         clusters=wf.CLUSTER_MODEL,
-        trained=[wf.trained_marker(c) for c in range(P["clustering"]["n_clusters"])],
+        networks=[wf.NETWORK.format(cluster=c) for c in CLUSTERS],
     output:
-        "results/normals/refinenet/{split}/{category}/{name}.normals",
+        wf.REFINED,
     params:
-        tracked=tracked("refine"),
-        network=json.dumps(P["network"]),
-        patches=json.dumps(P["patches"]),
-        inference=P["inference"],
-        model_dir=lambda w, input: os.path.dirname(os.path.dirname(input.trained[0])),
-        seed=lambda w: derive_seed(P["seed"], "refine", cloud_spec(w).key),
+        tracked=tracked("inference"),
     log:
-        "logs/refine/{split}/{category}/{name}.log",
+        "logs/inference/{cloud}.log",
     benchmark:
-        "logs/refine/{split}/{category}/{name}.benchmark.tsv"
+        "logs/inference/{cloud}.benchmark.tsv"
     threads: 1
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.refine --cloud {input.cloud} --features {input.features} --clusters {input.clusters}"
-        " --model-dir {params.model_dir} --network {params.network:q} --patches {params.patches:q}"
-        " --batch-size {params.inference[batch_size]} --device {params.inference[device]} --seed {params.seed}"
-        " --out {output} --threads {threads} 2>&1 | tee {log}"
+        "python -m stages.inference --cloud {input.cloud} --features {input.features} --clusters {input.clusters}"
+        " --networks {input.networks} --out {output} --threads {threads} 2>&1 | tee {log}"

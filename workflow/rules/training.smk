@@ -1,34 +1,29 @@
-# One network per cluster (ALGORITHM.md §9). Checkpoints live outside the outputs, so a killed run resumes.
+# One network per cluster (docs/algorithm.md §9). The network folder and the training history are the outputs;
+# checkpoints live outside them, so a killed run resumes from its last finished epoch.
 
 
-rule train:
+rule training:
     message:
         "train the network of cluster {wildcards.cluster}"
     input:
-        code=wf.STEPS["train"].code,
-        clouds=[wf.cloud_path(c) for c in TRAIN_SPECS],
-        features=[wf.features_path(c) for c in TRAIN_SPECS],
+        code=wf.STEPS["training"].code,
+        clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+        features=[wf.FEATURES.format(cloud=key) for key in TRAIN_KEYS],
         clusters=wf.CLUSTER_MODEL,
     output:
-        "results/models/refinenet/cluster_{cluster}/result.json",
-    wildcard_constraints:
-        cluster=r"\d+",
+        network=directory(wf.NETWORK),
+        history=wf.HISTORY,
     params:
-        tracked=tracked("train"),
-        network=json.dumps(P["network"]),
-        patches=json.dumps(P["patches"]),
-        training=lambda w: json.dumps({**P["training"], "seed": derive_seed(P["seed"], "train", w.cluster)}),
-        model_dir=lambda w, output: os.path.dirname(os.path.dirname(output[0])),
-        checkpoint_dir=wf.CHECKPOINT_DIR,
+        tracked=tracked("training"),
+        checkpoints=wf.CHECKPOINT_DIR,
     log:
-        "logs/train/cluster_{cluster}.log",
+        "logs/training/cluster_{cluster}.log",
     benchmark:
-        "logs/train/cluster_{cluster}.benchmark.tsv"
+        "logs/training/cluster_{cluster}.benchmark.tsv"
     threads: 1
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.train --clouds {input.clouds} --features {input.features} --clusters {input.clusters}"
-        " --cluster {wildcards.cluster} --network {params.network:q} --patches {params.patches:q}"
-        " --training {params.training:q} --out-dir {params.model_dir} --checkpoint-dir {params.checkpoint_dir}"
-        " --threads {threads} 2>&1 | tee {log}"
+        "python -m stages.training --cluster {wildcards.cluster} --clouds {input.clouds} --features {input.features}"
+        " --clusters {input.clusters} --out {output.network} --history {output.history}"
+        " --checkpoints {params.checkpoints} --threads {threads} 2>&1 | tee {log}"

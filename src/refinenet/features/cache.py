@@ -1,0 +1,97 @@
+"""The per-cloud feature cache (docs/algorithm.md §0, stages B, C and F): filtered normals, frames and height maps.
+
+These depend only on the points and the initial normals (never on ground truth, so the same code serves test
+clouds) and cost far more than a training step's share, so they are computed once per cloud and stored. The
+point patches (stage E) are not cached: 100 points per point would dwarf the rest, and kNN queries per batch
+are cheap.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from refinenet.config import FeatureConfig
+from refinenet.data import io
+from refinenet.data.noise import bbox_diagonal
+from refinenet.errors import InputError
+from refinenet.features.filtering import bilateral_filter
+from refinenet.features.heightmaps import height_maps
+from refinenet.geometry.frames import normal_frames
+from refinenet.geometry.neighbors import build_tree
+
+#: Points per height-map call: the unit of the progress bar (height_maps bounds its own memory per call).
+HEIGHT_STEP = 10_000
+
+
+@dataclass(frozen=True)
+class Features:
+    """One cloud's cached features, row i belonging to point i."""
+
+    nf: np.ndarray
+    """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them."""
+    frames: np.ndarray
+    """(N, 3, 3) float32: columns [e1 e2 e3] of the normal-tensor frame (§4)."""
+    heights: np.ndarray
+    """(N, X, m, m) float16 or float32: one height map per normal of nf, in nf's order."""
+    n_normals: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        n, width = self.nf.shape
+        object.__setattr__(self, "n_normals", width // 3)
+        if width % 3 or self.frames.shape != (n, 3, 3) or self.heights.shape[:2] != (n, width // 3):
+            raise ValueError(f"inconsistent feature shapes: nf {self.nf.shape}, frames {self.frames.shape}, "
+                             f"heights {self.heights.shape}")
+
+    def __len__(self) -> int:
+        return len(self.nf)
+
+    @property
+    def n_first(self) -> np.ndarray:
+        """(N, 3) the first normal of nf: the initial normal when X = 9; the sign reference of frames and targets."""
+        return self.nf[:, :3]
+
+
+def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig,
+                     progress: bool = False) -> Features:
+    """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part)."""
+    points = np.asarray(points, dtype=np.float64)
+    nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
+                          sigma_r=config.sigma_r, include_initial=config.include_initial)
+    frames = normal_frames(nf, config.frame_mode)
+    tree = build_tree(points)
+    extent = None if config.hmp_extent is None else config.hmp_extent * bbox_diagonal(points)
+    heights = np.empty((len(points), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
+    for start in tqdm(range(0, len(points), HEIGHT_STEP), desc="height maps", disable=not progress):
+        index = np.arange(start, min(start + HEIGHT_STEP, len(points)))
+        heights[index] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
+                                     tree=tree, index=index)
+    return Features(nf=nf, frames=frames.astype(np.float32), heights=heights)
+
+
+def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
+    """Write an uncompressed .npz atomically; `meta` (JSON-serialisable, e.g. the FeatureConfig) is stored with it."""
+    io.save_record(path, {"nf": features.nf, "frames": features.frames, "heights": features.heights}, meta)
+
+
+def load_features(path: str | Path) -> tuple[Features, dict[str, Any]]:
+    """The features and meta written by `save_features`; InputError for a missing or malformed file."""
+    arrays, meta = io.load_record(path, ("nf", "frames", "heights"), "feature cache")
+    try:
+        features = Features(nf=arrays["nf"], frames=arrays["frames"], heights=arrays["heights"])
+    except ValueError as err:
+        raise InputError(path, str(err)) from None
+    return features, meta
+
+
+def load_for_cloud(cloud_path: str | Path, features_path: str | Path) -> tuple[io.Cloud, Features]:
+    """A cloud record and its feature cache, checked to describe the same points."""
+    cloud = io.read_cloud(cloud_path)
+    features, _ = load_features(features_path)
+    if len(features) != len(cloud):
+        raise InputError(features_path, f"{len(features)} feature rows for {len(cloud)} points of {cloud_path}")
+    return cloud, features

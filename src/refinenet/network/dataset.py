@@ -1,0 +1,201 @@
+"""Network inputs from cached clouds, built a whole batch at a time (docs/algorithm.md §0, §4, §6, §9).
+
+Per sample: the X normals of nf in the local frame (3X), the point patch (P x 3, local frame), the X height maps
+and, when ground truth is known, the target g in the local frame after the sign rule g . n_first >= 0 (§4). The
+network predicts a local normal and inference rotates it back with the same frame.
+
+Training samples are the points of one cluster; 20 % of each cloud's points (stratified by cluster, seeded) are
+held out for validation, following [P] (§1.4 choice (a)). The split depends only on the cloud, its cluster ids
+and the seed, so every cluster's network sees the same partition of the points.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+from torch import Tensor
+
+from refinenet.config import PatchConfig
+from refinenet.features.cache import Features
+from refinenet.features.patches import point_patches
+from refinenet.geometry.frames import target_sign, to_local
+from refinenet.geometry.neighbors import build_tree
+from refinenet.network.clustering import ClusterModel, cloud_clusters, local_normals
+from refinenet.network.model import NetworkConfig
+
+
+@dataclass
+class PreparedCloud:
+    """A cloud prepared for the network: its cached features and cluster ids; ground-truth normals only for
+    training clouds (`prepare`).
+
+    The k-d tree is built once here and reused by every batch's patch query.
+    """
+
+    points: np.ndarray
+    """(N, 3) positions."""
+    features: Features
+    """Cached nf, frames and heights (`refinenet.features.cache`)."""
+    clusters: np.ndarray
+    """(N,) cluster ids, 0..Kc-1."""
+    normals: np.ndarray | None = None
+    """(N, 3) ground-truth normals (unoriented; normalised here), or None at test time."""
+    tree: cKDTree = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.points = np.asarray(self.points, dtype=np.float64)
+        self.clusters = np.asarray(self.clusters)
+        n = len(self.points)
+        if self.points.shape != (n, 3) or len(self.features) != n or self.clusters.shape != (n,):
+            raise ValueError(f"inconsistent cloud: points {self.points.shape}, {len(self.features)} feature rows, "
+                             f"clusters {self.clusters.shape}")
+        if self.normals is not None:
+            normals = np.asarray(self.normals, dtype=np.float32)
+            if normals.shape != (n, 3):
+                raise ValueError(f"ground-truth normals have shape {normals.shape}, expected ({n}, 3)")
+            self.normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+        self.tree = build_tree(self.points)
+
+
+def prepare(points: np.ndarray, features: Features, model: ClusterModel,
+            normals: np.ndarray | None = None) -> PreparedCloud:
+    """A cloud ready for training (with ground-truth `normals`) or inference: its points assigned to clusters."""
+    return PreparedCloud(points, features, cloud_clusters(model, features.nf, features.frames), normals)
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """A batch of network inputs (numpy, float32), all in the local frames of their points."""
+
+    normals: np.ndarray
+    """(B, 3X) the X normals of nf."""
+    points: np.ndarray | None
+    """(B, P, 3) point patches, or None when the network has no point module."""
+    heights: np.ndarray | None
+    """(B, X, m, m) height maps, or None when the network has no height-map module."""
+    target: np.ndarray | None
+    """(B, 3) ground truth after the sign rule, or None without ground truth."""
+
+    def __len__(self) -> int:
+        return len(self.normals)
+
+    def tensors(self, device: torch.device | str) -> tuple[Tensor, Tensor | None, Tensor | None]:
+        """(normals, points, heights) on `device`, the argument order of `RefineNet.forward`."""
+        def put(array: np.ndarray | None) -> Tensor | None:
+            return None if array is None else torch.from_numpy(array).to(device)
+        return torch.from_numpy(self.normals).to(device), put(self.points), put(self.heights)
+
+    @staticmethod
+    def concatenate(parts: Sequence[Inputs]) -> Inputs:
+        """One batch from parts that all carry the same inputs."""
+        def cat(name: str) -> np.ndarray | None:
+            arrays = [getattr(part, name) for part in parts]
+            return None if arrays[0] is None else np.concatenate(arrays)
+        return Inputs(normals=cat("normals"), points=cat("points"), heights=cat("heights"), target=cat("target"))
+
+
+def make_inputs(cloud: PreparedCloud, index: np.ndarray, patch: PatchConfig, network: NetworkConfig,
+                rng: np.random.Generator) -> Inputs:
+    """The inputs of points `index` of one cloud; patches and heights only if the network reads them.
+
+    `rng` draws the ball-mode subsets (unused by knn patches).
+    """
+    features = cloud.features
+    frames = features.frames[index]
+    nf = features.nf[index]
+    points = None
+    if network.uses_points:
+        points = point_patches(cloud.points, patch.mode, k=patch.k, radius=patch.radius,
+                               max_points=patch.max_points, rng=rng, frames=features.frames, index=index,
+                               tree=cloud.tree)
+    heights = features.heights[index].astype(np.float32) if network.uses_hmps else None
+    target = None
+    if cloud.normals is not None:
+        target = to_local(frames, target_sign(cloud.normals[index], nf[:, :3])).astype(np.float32)
+    return Inputs(normals=local_normals(nf, frames).astype(np.float32), points=points, heights=heights,
+                  target=target)
+
+
+@dataclass(frozen=True)
+class Samples:
+    """Sample references: point `point[s]` of cloud `cloud[s]`."""
+
+    cloud: np.ndarray
+    point: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.point)
+
+
+def holdout_mask(clusters: np.ndarray, fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """(N,) True for the validation points: round(fraction * n_c) random points of each cluster c."""
+    keys = rng.random(len(clusters))
+    order = np.lexsort((keys, clusters))
+    labels, starts, counts = np.unique(clusters[order], return_index=True, return_counts=True)
+    rank = np.arange(len(clusters)) - np.repeat(starts, counts)
+    mask = np.empty(len(clusters), dtype=bool)
+    mask[order] = rank < np.repeat(np.round(fraction * counts), counts)
+    return mask
+
+
+class ClusterData:
+    """Training and validation samples of one cluster over a list of clouds, and their batches.
+
+    Each cloud's split and point cap use the generator seeded with (seed, cloud position), so they are the same
+    for every cluster and every run. `max_train_points_per_cloud` keeps a random subset (drawn once) of each
+    cloud's training points, and caps its validation points in proportion (val_fraction / (1 - val_fraction)).
+    """
+
+    def __init__(self, clouds: Sequence[PreparedCloud], cluster: int, patch: PatchConfig, val_fraction: float,
+                 seed: int, max_train_points_per_cloud: int | None):
+        if not 0.0 < val_fraction < 1.0:
+            raise ValueError(f"val_fraction must be in (0, 1), got {val_fraction}")
+        if max_train_points_per_cloud is not None and max_train_points_per_cloud < 1:
+            raise ValueError(f"max_train_points_per_cloud must be at least 1, got {max_train_points_per_cloud}")
+        if any(cloud.normals is None for cloud in clouds):
+            raise ValueError("training clouds need ground-truth normals")
+        self.clouds, self.cluster, self.patch = list(clouds), cluster, patch
+        max_val = None
+        if max_train_points_per_cloud is not None:
+            max_val = max(1, round(max_train_points_per_cloud * val_fraction / (1.0 - val_fraction)))
+        train, val = [], []
+        for i, cloud in enumerate(self.clouds):
+            rng = np.random.default_rng([seed, i])
+            held_out = holdout_mask(cloud.clusters, val_fraction, rng)
+            mine = cloud.clusters == cluster
+            train.append(_cap(np.flatnonzero(mine & ~held_out), max_train_points_per_cloud, rng))
+            val.append(_cap(np.flatnonzero(mine & held_out), max_val, rng))
+        self.train, self.val = _samples(train), _samples(val)
+
+    def batches(self, samples: Samples, batch_size: int, network: NetworkConfig, rng: np.random.Generator,
+                shuffle: bool, drop_last: bool) -> Iterator[Inputs]:
+        """Batches in shuffled (by `rng`) or stored order; `rng` also draws ball-mode patch subsets.
+
+        Within a batch the samples are grouped by cloud (one patch query per cloud), which leaves the set, and
+        so the loss, unchanged.
+        """
+        order = rng.permutation(len(samples)) if shuffle else np.arange(len(samples))
+        stop = len(order) - len(order) % batch_size if drop_last else len(order)
+        for start in range(0, stop, batch_size):
+            chosen = order[start:start + batch_size]
+            clouds, points = samples.cloud[chosen], samples.point[chosen]
+            parts = [make_inputs(self.clouds[c], points[clouds == c], self.patch, network, rng)
+                     for c in np.unique(clouds)]
+            yield Inputs.concatenate(parts)
+
+
+def _cap(index: np.ndarray, limit: int | None, rng: np.random.Generator) -> np.ndarray:
+    """A sorted random subset of at most `limit` entries of `index`."""
+    if limit is None or len(index) <= limit:
+        return index
+    return np.sort(rng.choice(index, limit, replace=False))
+
+
+def _samples(per_cloud: Sequence[np.ndarray]) -> Samples:
+    cloud = np.repeat(np.arange(len(per_cloud)), [len(p) for p in per_cloud])
+    point = np.concatenate(per_cloud) if per_cloud else np.zeros(0, dtype=np.int64)
+    return Samples(cloud=cloud, point=point.astype(np.int64))

@@ -1,0 +1,240 @@
+"""Training one cluster's network (docs/algorithm.md §9, stage H), resumable after a kill with identical results.
+
+Output folder of a cluster (`cluster_dir`):
+* `checkpoint.pt`: model, optimiser, epoch, best epoch and validation RMSE, the history rows and a fingerprint of
+  the settings; written atomically after every epoch. Random state needs no saving: every epoch reseeds numpy
+  (shuffling, ball patches) and torch (dropout) from (seed, epoch), so a resumed epoch draws what an
+  uninterrupted one would.
+* `best.pt`: the weights of the epoch with the lowest validation RMSE (unoriented angle, degrees).
+* `history.csv`: epoch, train_loss, val_mean_deg, val_rmse_deg, seconds (rewritten atomically after every
+  epoch); the pipeline keeps it elsewhere (`history_path`), in a folder that DVC declares as plots.
+* `result.json`: how the training ended (`TrainResult`) and the sample counts, written last: its presence marks
+  a finished cluster.
+* `empty.json` instead of `best.pt`, when the cluster has too few points to train (fewer than 2 training or no
+  validation points): inference then keeps the first normal of nf (the initial normal when X = 9) there.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+import torch.nn.functional as F
+from tqdm import tqdm
+
+from refinenet.atomic import atomic_path, write_text
+from refinenet.config import LOSSES as LOSS_NAMES
+from refinenet.config import PatchConfig, TrainConfig
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.network.dataset import ClusterData, PreparedCloud
+from refinenet.network.model import NetworkConfig, RefineNet
+
+LOSSES = dict(zip(LOSS_NAMES, (F.mse_loss, F.l1_loss), strict=True))
+CHECKPOINT, BEST, HISTORY, EMPTY, RESULT = "checkpoint.pt", "best.pt", "history.csv", "empty.json", "result.json"
+HISTORY_COLUMNS = ("epoch", "train_loss", "val_mean_deg", "val_rmse_deg", "seconds")
+#: Settings that may change between a run and its resumption without invalidating the checkpoint.
+RESUMABLE_CHANGES = ("max_epochs", "patience", "device", "threads")
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """What `train_cluster` ended with."""
+
+    epochs: int
+    """Epochs completed (over all resumptions)."""
+    best_epoch: int
+    """Epoch of best.pt (1-based); 0 for an empty cluster."""
+    best_val_rmse_deg: float
+    """Validation RMSE of best.pt in degrees; nan for an empty cluster."""
+    stopped_early: bool
+    """True when patience ran out before max_epochs."""
+    empty: bool
+    """True when the cluster had too few points and only empty.json was written."""
+
+
+def cluster_dir(model_dir: str | Path, cluster: int) -> Path:
+    """The output folder of one cluster's network."""
+    return Path(model_dir) / f"cluster_{cluster}"
+
+
+def resolve_device(device: str) -> torch.device:
+    """auto -> cuda when available, else cpu; an explicit cuda without a GPU is an error."""
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    if device == "cuda" and not torch.cuda.is_available():
+        raise ValueError("device 'cuda' was requested but torch sees no CUDA device")
+    return torch.device(device)
+
+
+def cluster_data(clouds: Sequence[PreparedCloud], cluster: int, config: TrainConfig,
+                 patch: PatchConfig) -> ClusterData:
+    """The samples of one cluster with the split and caps that `config` fixes."""
+    return ClusterData(clouds, cluster, patch, val_fraction=config.val_fraction, seed=config.seed,
+                       max_train_points_per_cloud=config.max_train_points_per_cloud)
+
+
+def network_fingerprint(network: NetworkConfig) -> str:
+    """The architecture as JSON, stored with the weights so that loading checks it."""
+    return json.dumps(asdict(network), sort_keys=True)
+
+
+def train_cluster(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_dir: str | Path,
+                  progress: bool = True, checkpoint_dir: str | Path | None = None,
+                  history_path: str | Path | None = None) -> TrainResult:
+    """Train (or resume training) the network of `data.cluster` in `out_dir` until patience or max_epochs.
+
+    The resumable checkpoint goes to `checkpoint_dir` (default `out_dir`): a pipeline keeps it outside the
+    folders that Snakemake and DVC clear before rerunning a step, so a killed run loses no finished epoch.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint_dir = Path(checkpoint_dir) if checkpoint_dir is not None else out_dir
+    checkpoint_dir.mkdir(parents=True, exist_ok=True)
+    history_path = Path(history_path) if history_path is not None else out_dir / HISTORY
+    n_train, n_val = len(data.train), len(data.val)
+    counts = {"cluster": data.cluster, "train_points": n_train, "val_points": n_val}
+    if n_train < 2 or n_val == 0:
+        write_text(out_dir / EMPTY, json.dumps(counts, indent=2) + "\n")
+        _write_history(history_path, [])
+        result = TrainResult(epochs=0, best_epoch=0, best_val_rmse_deg=float("nan"), stopped_early=False, empty=True)
+    else:
+        (out_dir / EMPTY).unlink(missing_ok=True)
+        with torch_threads(config.threads):
+            result = _train(config, network, data, out_dir, checkpoint_dir / CHECKPOINT, history_path, progress)
+    write_text(out_dir / RESULT, json.dumps({**counts, **asdict(result)}, indent=2) + "\n")
+    return result
+
+
+@contextmanager
+def torch_threads(threads: int | None) -> Iterator[None]:
+    """torch's CPU thread count set to `threads` (None: unchanged) for the block, then restored: a process-wide
+    setting that a library call should not leave behind."""
+    previous = torch.get_num_threads()
+    if threads is not None:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)
+
+
+def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_dir: Path, checkpoint: Path,
+           history: Path, progress: bool) -> TrainResult:
+    """The epoch loop of `train_cluster` for a non-empty cluster."""
+    n_train = len(data.train)
+    device = resolve_device(config.device)
+    torch.manual_seed(config.seed)
+    model = RefineNet(network).to(device)
+    optimizer = _optimizer(config, model)
+    fingerprint = _fingerprint(config, network, data)
+    state: dict[str, Any] = {"epoch": 0, "best_epoch": 0, "best_val_rmse_deg": float("inf"), "history": []}
+    saved = torch.load(checkpoint, map_location=device, weights_only=True) if checkpoint.exists() else None
+    if saved is not None and saved["fingerprint"] != fingerprint:
+        tqdm.write(f"{checkpoint}: written with other settings or data; starting over")
+        saved = None
+    if saved is not None:
+        model.load_state_dict(saved["model"])
+        optimizer.load_state_dict(saved["optimizer"])
+        state = {key: saved[key] for key in state}
+    _write_history(history, state["history"])
+
+    batch_size = min(config.batch_size, n_train)
+    while state["epoch"] < config.max_epochs and state["epoch"] - state["best_epoch"] < config.patience:
+        epoch = state["epoch"] + 1
+        start = time.perf_counter()
+        seeds = np.random.SeedSequence([config.seed, epoch])
+        rng = np.random.default_rng(seeds)
+        torch.manual_seed(int(seeds.generate_state(1)[0]))
+        batches = tqdm(data.batches(data.train, batch_size, network, rng, shuffle=True, drop_last=True),
+                       total=n_train // batch_size, desc=f"cluster {data.cluster} epoch {epoch}", leave=False,
+                       disable=not progress)
+        train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, device)
+        angles = _validate(model, data, network, config, device)
+        row = {"epoch": epoch, "train_loss": train_loss, "val_mean_deg": float(angles.mean()),
+               "val_rmse_deg": float(np.sqrt(np.mean(angles ** 2))), "seconds": time.perf_counter() - start}
+        if row["val_rmse_deg"] < state["best_val_rmse_deg"]:
+            state["best_epoch"], state["best_val_rmse_deg"] = epoch, row["val_rmse_deg"]
+            with atomic_path(out_dir / BEST) as tmp:
+                torch.save({"model": model.state_dict(), "network": network_fingerprint(network), "epoch": epoch,
+                            "val_rmse_deg": row["val_rmse_deg"]}, tmp)
+        state["epoch"] = epoch
+        state["history"] = [*state["history"], row]
+        with atomic_path(checkpoint) as tmp:
+            torch.save({**state, "fingerprint": fingerprint, "model": model.state_dict(),
+                        "optimizer": optimizer.state_dict()}, tmp)
+        _write_history(history, state["history"])
+        if progress:
+            tqdm.write(f"cluster {data.cluster} epoch {epoch}: train loss {train_loss:.5f}, "
+                       f"val mean {row['val_mean_deg']:.3f} deg, val RMSE {row['val_rmse_deg']:.3f} deg")
+    return TrainResult(epochs=state["epoch"], best_epoch=state["best_epoch"],
+                       best_val_rmse_deg=state["best_val_rmse_deg"],
+                       stopped_early=state["epoch"] < config.max_epochs, empty=False)
+
+
+def _optimizer(config: TrainConfig, model: torch.nn.Module) -> torch.optim.Optimizer:
+    if config.optimizer == "sgd":
+        return torch.optim.SGD(model.parameters(), lr=config.lr, momentum=config.momentum,
+                               weight_decay=config.weight_decay)
+    return torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+
+
+def _fingerprint(config: TrainConfig, network: NetworkConfig, data: ClusterData) -> str:
+    """What must not change for a checkpoint to be resumed: settings, architecture and the samples."""
+    train = {k: v for k, v in asdict(config).items() if k not in RESUMABLE_CHANGES}
+    samples = {"cluster": data.cluster, "patch": asdict(data.patch), "clouds": len(data.clouds),
+               "train": _digest(data.train.cloud, data.train.point), "val": _digest(data.val.cloud, data.val.point)}
+    return json.dumps({"train": train, "network": json.loads(network_fingerprint(network)), "samples": samples},
+                      sort_keys=True)
+
+
+def _digest(*arrays: np.ndarray) -> str:
+    """A short content hash of integer arrays (which points are training and validation samples)."""
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.int64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: Any, batches: tqdm,
+                 device: torch.device) -> float:
+    """One pass over the training batches (a tqdm-wrapped `ClusterData.batches`); the mean loss per sample."""
+    model.train()
+    total, count = 0.0, 0
+    for inputs in batches:
+        target = torch.from_numpy(inputs.target).to(device)
+        optimizer.zero_grad(set_to_none=True)
+        loss = loss_fn(model(*inputs.tensors(device)), target)
+        loss.backward()
+        optimizer.step()
+        total += loss.item() * len(inputs)
+        count += len(inputs)
+        batches.set_postfix(loss=f"{total / count:.5f}")
+    return total / count
+
+
+def _validate(model: RefineNet, data: ClusterData, network: NetworkConfig, config: TrainConfig,
+              device: torch.device) -> np.ndarray:
+    """Unoriented angles (degrees) between predictions and targets on the validation samples; the same ball
+    subsets every epoch (a fixed generator), so epochs are compared on the same inputs."""
+    model.eval()
+    rng = np.random.default_rng(config.seed)
+    angles = []
+    with torch.inference_mode():
+        for inputs in data.batches(data.val, config.batch_size, network, rng, shuffle=False, drop_last=False):
+            out = model(*inputs.tensors(device)).cpu().numpy()
+            angles.append(unoriented_angles(out, inputs.target))
+    return np.concatenate(angles)
+
+
+def _write_history(path: Path, rows: list[dict[str, Any]]) -> None:
+    with atomic_path(path) as tmp:
+        pd.DataFrame(rows, columns=list(HISTORY_COLUMNS)).to_csv(tmp, index=False)

@@ -1,0 +1,121 @@
+"""Snakemake owns the commands, DVC owns the record (docs/design.md §3).
+
+* `run STEP`: what a dvc.yaml stage executes. Asks Snakemake for exactly that step's files
+  (`--allowed-rules STEP`, so upstream outputs are never touched) after removing orphan files from the
+  step's output folders, so DVC records what the current params produce and nothing else.
+* `record`: after a plain Snakemake run, write every finished, up-to-date step into dvc.lock
+  (`dvc commit`), so `dvc repro` has nothing to redo. The Snakefile calls it on success. One
+  `snakemake --summary` tells which steps are up to date.
+* `sync`: after `dvc checkout`/`dvc pull`/`git checkout`, when `dvc status` is clean, mark the restored
+  files up to date for Snakemake (`snakemake --touch`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from refinenet import config
+from refinenet.errors import RefineNetError
+from refinenet.pipeline.workflow import STEPS, Step
+
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", "workflow/Snakefile"]
+
+
+def produced(path: Path, targets: list[str]) -> bool:
+    """True when `path` is a target or lies inside a target folder (a rule's `directory()` output)."""
+    path = path.resolve()
+    return any(path == t or t in path.parents for t in (Path(t).resolve() for t in targets))
+
+
+def prune(step: Step, targets: list[str]) -> list[Path]:
+    """Delete files inside the step's output folders that the current params no longer produce (e.g. the
+    networks of clusters beyond a lowered Kc); every file a step makes is one of its targets."""
+    removed = []
+    for out in map(Path, (*step.outs, *step.plots)):
+        if not out.is_dir():
+            continue
+        for path in sorted(out.rglob("*")):
+            if path.is_file() and not produced(path, targets):
+                path.unlink()
+                removed.append(path)
+        for folder in sorted((p for p in out.rglob("*") if p.is_dir()), reverse=True):
+            if not any(folder.iterdir()):
+                folder.rmdir()
+    return removed
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "REFINENET_BRIDGE": "1"}
+
+
+def run(name: str, cores: str) -> int:
+    step = STEPS[name]
+    targets = step.targets(config.load())
+    for path in prune(step, targets):
+        print(f"removed orphan {path}")
+    cmd = [*SNAKEMAKE, "--cores", cores, "--allowed-rules", step.name, "--", *targets]
+    return subprocess.run(cmd, env=_env()).returncode
+
+
+def up_to_date_files() -> set[str]:
+    """The outputs that exist and that Snakemake would not rebuild (status `ok` in `snakemake --summary`)."""
+    summary = subprocess.run([*SNAKEMAKE, "--summary", "--cores", "1"], env=_env(), capture_output=True, text=True)
+    if summary.returncode != 0:
+        return set()
+    rows = [line.split("\t") for line in summary.stdout.splitlines()[1:]]
+    return {row[0] for row in rows if len(row) > 4 and row[4] == "ok" and Path(row[0]).exists()}
+
+
+def record() -> int:
+    if not Path(".dvc").is_dir() or shutil.which("dvc") is None:
+        print("record: no DVC repository here; nothing recorded")
+        return 0
+    params = config.load()
+    done = up_to_date_files()
+    finished = []
+    for step in STEPS.values():
+        targets = step.targets(params)
+        if set(targets) <= done:
+            prune(step, targets)
+            finished.append(step.name)
+    if finished:
+        subprocess.run(["dvc", "commit", "--force", "--quiet", *finished], check=True)
+        print(f"recorded in dvc.lock: {', '.join(finished)}")
+    return 0
+
+
+def sync() -> int:
+    status = subprocess.run(["dvc", "status", "--json"], capture_output=True, text=True, check=True)
+    if json.loads(status.stdout or "{}"):
+        print("sync: `dvc status` is not clean; run `dvc checkout` or `dvc repro` first", file=sys.stderr)
+        return 1
+    targets = [t for step in STEPS.values() for t in step.targets(config.load())]
+    return subprocess.run([*SNAKEMAKE, "--touch", "--cores", "1", "--", *targets], env=_env()).returncode
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    run_p = sub.add_parser("run", help="run one step's jobs through Snakemake (what its DVC stage executes)")
+    run_p.add_argument("step", choices=list(STEPS))
+    run_p.add_argument("--cores", default=os.environ.get("REFINENET_CORES", "all"))
+    sub.add_parser("record", help="record finished Snakemake steps in dvc.lock")
+    sub.add_parser("sync", help="mark DVC-restored outputs up to date for Snakemake")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "run":
+            return run(args.step, args.cores)
+        return record() if args.command == "record" else sync()
+    except RefineNetError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,99 @@
+"""Data sources: procedural, mesh folders, PCPNet-format folders and generic point folders."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from settings import BASE
+
+from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud
+from refinenet.data.io import write_ply
+from refinenet.data.noise import bbox_diagonal
+from refinenet.errors import InputError, ParamsError
+
+
+def data_block(**overrides):
+    return replace(BASE.data, **overrides)
+
+
+def test_procedural_clouds_follow_the_paper_noise_levels():
+    specs = list_clouds(data_block(), BASE.noise)
+    levels = {(s.split, s.category): set() for s in specs}
+    for s in specs:
+        levels[(s.split, s.category)].add(s.noise)
+    assert levels[("test", "SharpFeature")] == {0.05, 0.10, 0.15}
+    assert levels[("test", "RichFeature")] == {0.05, 0.10, 0.15, 0.20}
+    assert levels[("test", "BigNoise")] == {0.2, 0.3, 0.4, 0.5}
+    assert levels[("train", "SmoothSurface")] == {0.1, 0.2, 0.3}
+    assert ("train", "BigNoise") not in levels
+    train = {s.origin for s in specs if s.split == "train"}
+    test = {s.origin for s in specs if s.split == "test"}
+    assert not train & test
+
+
+def test_procedural_cloud_records_its_seeds_and_noise():
+    spec = CloudSpec("test", "SharpFeature", "lblock_a_n0.10", "lblock_a", 0.10)
+    cloud = make_cloud(spec, 5000, seed=3)
+    again = make_cloud(spec, 5000, seed=3)
+    np.testing.assert_array_equal(cloud.points, again.points)
+    assert cloud.meta["noise_percent"] == 0.10 and cloud.meta["noise_seed"] != cloud.meta["sample_seed"]
+    assert cloud.meta["noise_sigma"] == pytest.approx(0.001 * cloud.meta["l_d"])
+    other_level = make_cloud(CloudSpec("test", "SharpFeature", "lblock_a_n0.15", "lblock_a", 0.15), 5000, seed=3)
+    displacement = np.linalg.norm(other_level.points - cloud.points, axis=1).mean()
+    assert displacement < 0.01 * cloud.meta["l_d"]  # the same clean sample under both noise levels
+
+
+def test_mesh_folder(shared_data):
+    folders = {"train": "train", "test": "dev"}
+    data = data_block(source="meshes", path=str(shared_data / "meshes"), split_folders=folders)
+    specs = list_clouds(data, BASE.noise)
+    test_cats = {s.category for s in specs if s.split == "test"}
+    assert test_cats == {"SharpFeature", "SmoothSurface", "RichFeature"}
+    assert sum(s.split == "test" and s.category == "SharpFeature" for s in specs) == 3 * 3
+    spec = next(s for s in specs if s.name.startswith("pyramid"))
+    cloud = make_cloud(spec, 3000, seed=1)
+    assert cloud.points.shape == (3000, 3) and np.allclose(np.linalg.norm(cloud.normals, axis=1), 1)
+    assert cloud.meta["noise_sigma"] == pytest.approx(spec.noise / 100 * cloud.meta["l_d"])
+
+
+def test_pcpnet_folder(shared_data, tmp_path):
+    for name in ("fandisk100k", "cube100k"):
+        for suffix in (".xyz", ".normals"):
+            (tmp_path / f"{name}{suffix}").symlink_to(shared_data / "pcpnet_format" / f"{name}{suffix}")
+    np.savetxt(tmp_path / "cube100k.pidx", np.arange(0, 100000, 20), fmt="%d")
+    (tmp_path / "train.txt").write_text("fandisk100k\n")
+    (tmp_path / "test.txt").write_text("cube100k\n")
+    data = data_block(source="pcpnet", path=str(tmp_path), pcpnet={"train_list": "train.txt",
+                                                                    "test_lists": {"None": "test.txt"}})
+    specs = list_clouds(data, BASE.noise)
+    assert [(s.split, s.category, s.name) for s in specs] == [("train", "train", "fandisk100k"),
+                                                               ("test", "None", "cube100k")]
+    cloud = make_cloud(specs[1], 0, seed=0)
+    assert len(cloud) == 100000 and len(cloud.meta["pidx"]) == 5000 and cloud.meta["noise_percent"] is None
+    (tmp_path / "test.txt").write_text("missing_shape\n")
+    with pytest.raises(InputError, match="missing_shape.xyz"):
+        make_cloud(list_clouds(data, BASE.noise)[1], 0, seed=0)
+
+
+def test_points_folder(tmp_path):
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(500, 3))
+    normals = points / np.linalg.norm(points, axis=1, keepdims=True)
+    (tmp_path / "test" / "smooth").mkdir(parents=True)
+    write_ply(tmp_path / "test" / "smooth" / "ball.ply", points, normals)
+    np.save(tmp_path / "test" / "smooth" / "ball2.npy", np.hstack([points, normals]))
+    np.savetxt(tmp_path / "test" / "smooth" / "bare.xyz", points)  # no normals: refused when made
+    specs = list_clouds(data_block(source="points", path=str(tmp_path)), BASE.noise)
+    assert [s.name for s in specs] == ["ball", "ball2", "bare"] and {s.category for s in specs} == {"SmoothSurface"}
+    cloud = make_cloud(specs[0], 0, seed=0)
+    np.testing.assert_allclose(cloud.normals, normals, atol=1e-12)
+    assert cloud.meta["l_d"] == pytest.approx(bbox_diagonal(points))
+    with pytest.raises(InputError, match="no normals"):
+        make_cloud(specs[2], 0, seed=0)
+
+
+def test_bad_source_settings(tmp_path):
+    with pytest.raises(ParamsError, match="data.path"):
+        list_clouds(data_block(source="meshes", path=str(tmp_path / "nowhere")), BASE.noise)
+    with pytest.raises(ParamsError, match="no test clouds"):
+        list_clouds(data_block(source="points", path=str(tmp_path)), BASE.noise)
