@@ -65,3 +65,22 @@ def test_every_stage_names_the_bad_params_key(tmp_path):
     run = stage("baselines", "--params", str(params), "--method", "pca", "--cloud", "x.xyz", "--out", "x.npy")
     assert run.returncode == 2
     assert run.stderr.strip() == f"error: {params}: baselines.pca_k: -5 is less than the minimum of 3"
+
+
+def test_a_full_disk_fails_with_one_line_and_leaves_no_file(tmp_path):
+    """ENOSPC on a 64 kB tmpfs (needs root to mount; skipped otherwise): one line, exit 2, nothing left behind."""
+    full = tmp_path / "full"
+    full.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(full)], capture_output=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({mounted.stderr.decode().strip() or 'not root'})")
+    try:
+        rng = np.random.default_rng(0)
+        np.savetxt(tmp_path / "plane.xyz", np.c_[rng.uniform(size=(20000, 2)), np.zeros(20000)])
+        out = full / "plane.normals"
+        run = stage("baselines", "--method", "pca", "--cloud", str(tmp_path / "plane.xyz"), "--out", str(out))
+        assert run.returncode == 2
+        assert run.stderr.strip() == f"error: {out}: cannot be written (No space left on device)"
+        assert list(full.iterdir()) == []
+    finally:
+        subprocess.run(["umount", str(full)], check=True)

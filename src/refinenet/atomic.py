@@ -1,5 +1,6 @@
 """Atomic output: every file is written under a temporary name in its folder and renamed when complete,
-so a killed job never leaves a file that looks finished."""
+so a killed job never leaves a file that looks finished, and a failed write (a full disk) leaves nothing and
+says so in one line."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+from refinenet.errors import OutputError
 
 
 @contextmanager
@@ -18,13 +21,18 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     behave as they would for the final file.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    except OSError as err:
+        raise OutputError(path, f"cannot be written ({err.strerror})") from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
         os.replace(tmp_path, path)
+    except OSError as err:
+        raise OutputError(path, f"cannot be written ({err.strerror})") from None
     finally:
         if tmp_path.exists():
             tmp_path.unlink()

@@ -17,6 +17,14 @@ class InputError(RefineNetError):
         super().__init__(f"{self.path}: {problem}")
 
 
+class OutputError(RefineNetError):
+    """An output that cannot be written (no space left, no permission); nothing that looks complete is left."""
+
+    def __init__(self, path: str | Path, problem: str):
+        self.path, self.problem = str(path), problem
+        super().__init__(f"{self.path}: {problem}")
+
+
 class ParamsError(RefineNetError):
     """An invalid configuration value, named by its dotted key."""
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from refinenet.atomic import atomic_path
-from refinenet.errors import InputError
+from refinenet.errors import InputError, OutputError
 
 #: Point files a user or a data source gives, and (with .npz) the pipeline's own cloud records.
 POINT_FILE_SUFFIXES = (".xyz", ".ply", ".pcd", ".npy")
@@ -214,4 +214,4 @@ def write_ply(path: str | Path, points: np.ndarray, normals: np.ndarray | None =
         pcd.normals = o3d.utility.Vector3dVector(np.asarray(normals, dtype=np.float64))
     with atomic_path(path) as tmp:
         if not o3d.io.write_point_cloud(str(tmp), pcd, write_ascii=False):
-            raise InputError(path, "Open3D could not write the file")
+            raise OutputError(path, "Open3D could not write the file")
