@@ -1,4 +1,5 @@
-"""Thin entry points, one per Snakemake rule: parse explicit paths and parameters, call the library,
+"""Thin entry points, one per step family (`workflow/rules/<family>.smk`): read the params file and the paths a job
+works on, call the library,
 write outputs atomically. No algorithm code lives here.
 
 BLAS, OpenMP and numba read their thread count once, when first imported, so the `--threads` of the job
