@@ -13,6 +13,7 @@ here, and a stage script loads `Params` without importing the floors it does not
 from __future__ import annotations
 
 import copy
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -423,18 +424,29 @@ def resolve(raw: dict[str, Any], source: str = "params.yaml", apply_profile: boo
         raise ParamsError("profile", f"'{profile}' is not one of the profiles {sorted(profiles)}", source)
     try:
         resolved = deep_merge(raw, {**profiles[profile], "profile": profile} if apply_profile else {}, "")
-        for name, block in profiles.items():
-            deep_merge(raw, block, f"profiles.{name}.")
+        every_profile = {name: deep_merge(raw, block, f"profiles.{name}.") for name, block in profiles.items()}
     except ParamsError as err:
         raise ParamsError(err.key, err.problem, source) from None
     validate(resolved, source)
+    # Values the active profile masks, and those of the other profiles, are checked too, so that a bad value
+    # is reported when it is written, not when a profile first uses it.
+    validate(raw, source)
+    for name, merged in every_profile.items():
+        try:
+            validate(merged, source)
+        except ParamsError as err:
+            raise ParamsError(f"profiles.{name}.{err.key}", err.problem, source) from None
     return resolved
+
+
+@functools.cache
+def _validator() -> jsonschema.Draft202012Validator:
+    return jsonschema.Draft202012Validator(yaml.safe_load(SCHEMA.read_text()))
 
 
 def validate(params: dict[str, Any], source: str = "params.yaml") -> None:
     """Check every value against the JSON schema; report the first problem with its dotted key."""
-    spec = yaml.safe_load(SCHEMA.read_text())
-    errors = sorted(jsonschema.Draft202012Validator(spec).iter_errors(params), key=lambda e: list(e.path))
+    errors = sorted(_validator().iter_errors(params), key=lambda e: list(e.path))
     if errors:
         err = errors[0]
         key = ".".join(str(p) for p in err.path) or "(top level)"
@@ -446,7 +458,7 @@ def read_raw(path: str | Path = "params.yaml") -> dict[str, Any]:
     path = Path(path)
     try:
         return yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as err:
+    except (OSError, ValueError, yaml.YAMLError) as err:  # ValueError: not UTF-8 text
         raise ParamsError("(file)", f"cannot be read as YAML ({str(err).splitlines()[0]})", str(path)) from None
 
 

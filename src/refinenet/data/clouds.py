@@ -11,6 +11,7 @@ Splits are `train` and `test`; categories are those of the paper's tables.
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -120,7 +121,13 @@ def _folder(data: DataConfig, noise: NoiseConfig, suffixes: tuple[str, ...], syn
 def _read_list(path: Path) -> list[str]:
     if not path.is_file():
         raise InputError(path, "PCPNet list file not found")
-    return [line.strip() for line in path.read_text().splitlines() if line.strip()]
+    try:
+        names = [line.strip() for line in path.read_text(encoding="utf-8-sig").splitlines() if line.strip()]
+    except UnicodeDecodeError:
+        raise InputError(path, "not a text file (a PCPNet list names one shape per line)") from None
+    if not names:
+        raise InputError(path, "empty PCPNet list file (no shape names)")
+    return names
 
 
 def _root(data: DataConfig) -> Path:
@@ -171,9 +178,13 @@ def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -
 
 def _read_pidx(path: Path, n_points: int) -> list[int]:
     try:
-        idx = np.loadtxt(path, dtype=np.int64, ndmin=1)
-    except ValueError as err:
+        with warnings.catch_warnings():  # an empty file is reported below, not as a warning on stderr
+            warnings.simplefilter("ignore", UserWarning)
+            idx = np.loadtxt(path, dtype=np.int64, ndmin=1)
+    except (ValueError, OSError) as err:
         raise InputError(path, f"malformed .pidx file ({str(err).splitlines()[0]})") from None
-    if idx.size == 0 or idx.min() < 0 or idx.max() >= n_points:
+    if idx.size == 0:
+        raise InputError(path, "empty .pidx file (no point indices)")
+    if idx.min() < 0 or idx.max() >= n_points:
         raise InputError(path, f".pidx indices must lie in 0..{n_points - 1}")
     return idx.tolist()

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from refinenet.data.io import check_file
+from refinenet.data.io import check_extent, check_file, native_output_captured, reader_failure
 from refinenet.errors import InputError
 
 MESH_SUFFIXES = (".off", ".obj", ".ply")
@@ -38,6 +38,9 @@ def _checked(path: Path, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.nd
     if faces.min() < 0 or faces.max() >= len(vertices):
         row = int(np.argmax((faces < 0).any(axis=1) | (faces >= len(vertices)).any(axis=1)))
         raise InputError(path, f"triangle {row} refers to a vertex outside 0..{len(vertices) - 1}")
+    check_extent(path, vertices[np.unique(faces)], "vertices")
+    if not (np.linalg.norm(_face_cross(vertices, faces), axis=1) > 0).any():
+        raise InputError(path, f"all {len(faces)} triangles have zero area (repeated or collinear vertices)")
     return vertices, faces
 
 
@@ -48,7 +51,7 @@ def _fan(polygons: list[list[str]]) -> list[tuple[str, str, str]]:
 def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """OFF, COFF, NOFF...: counts on the keyword line or the next one, `#` comments, extra columns ignored."""
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(path, "not a text OFF file (binary OFF is not supported)") from None
     rows = [r for r in (line.split("#", 1)[0].split() for line in text.splitlines()) if r]
@@ -85,15 +88,43 @@ def _ply_counts(path: Path) -> tuple[int, int]:
 def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray]:
     import open3d as o3d
 
-    mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
+    if path.suffix.lower() == ".obj":
+        _check_obj_vertices(path)
+    with native_output_captured() as messages:  # Open3D's and RPly's warnings, kept off the stage's stderr
+        mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.triangles, dtype=np.int64)
+    problem = reader_failure(path, messages)
+    if problem and len(faces) == 0:
+        raise InputError(path, f"unreadable mesh ({problem})")
     if path.suffix.lower() == ".ply":
         n_vertices, n_faces = _ply_counts(path)
         if len(vertices) != n_vertices or len(faces) < n_faces:
             raise InputError(path, f"truncated or unreadable PLY file (header declares {n_vertices} vertices "
                                    f"and {n_faces} faces, read {len(vertices)} and {len(faces)} triangles)")
     return vertices, faces
+
+
+def _check_obj_vertices(path: Path) -> None:
+    """Every `v` line of an OBJ file has three numbers (Open3D's reader silently drops the rest of the mesh), and
+    there is an `f` line."""
+    faces = 0
+    with open(path, "rb") as fh:
+        for number, line in enumerate(fh, 1):
+            words = line.split()
+            if words[:1] == [b"v"] and not _numbers(words[1:4], 3):
+                text = line.decode("utf-8", "replace").strip()
+                raise InputError(path, f"vertex on line {number} is not three numbers ({text[:60]!r})")
+            faces += words[:1] == [b"f"]
+    if not faces:
+        raise InputError(path, "no triangles in mesh (no 'f' lines: a point cloud?)")
+
+
+def _numbers(words: list[bytes], count: int) -> bool:
+    try:
+        return len([float(w) for w in words]) == count
+    except ValueError:
+        return False
 
 
 def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
