@@ -4,13 +4,15 @@ outputs (so nothing a step made is pruned, and DVC caches it), and the real-scan
 so marked slow."""
 
 import json
-import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from kill_anywhere import kill_anywhere, passed
+from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.pipeline.bridge import produced
@@ -18,49 +20,26 @@ from refinenet.pipeline.workflow import CHECKPOINT_DIR, HISTORY, NETWORK, STEPS
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
+#: Seconds the uninterrupted smoke run took, for spreading the kills of the kill-anywhere test over a run.
+LENGTH: dict[str, float] = {}
 TABLE = "reports/table_synthetic.csv"
-
-
-def sh(cwd: Path, *cmd: str) -> subprocess.CompletedProcess:
-    run = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True)
-    assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
-    return run
-
-
-def snakemake(cwd: Path, *args: str) -> subprocess.CompletedProcess:
-    return sh(cwd, sys.executable, "-m", "snakemake", *args)
-
-
-def set_param(repo: Path, old: str, new: str) -> None:
-    params = repo / "params.yaml"
-    text = params.read_text()
-    assert old in text
-    params.write_text(text.replace(old, new, 1))
-
-
-def smoke_copy(tmp: Path) -> Path:
-    """The working tree (tracked and untracked, not ignored files) in a fresh git repository, profile smoke."""
-    files = sh(REPO, "git", "ls-files", "-co", "--exclude-standard").stdout.split()
-    for f in files:
-        if (REPO / f).is_file():
-            (tmp / f).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(REPO / f, tmp / f)
-    set_param(tmp, "profile: cpu", "profile: smoke")
-    sh(tmp, "git", "init", "-q")
-    return tmp
 
 
 @pytest.fixture(scope="module")
 def by_snakemake(tmp_path_factory):
     repo = smoke_copy(tmp_path_factory.mktemp("snakemake"))
+    began = time.monotonic()
     snakemake(repo, "-j2")
+    LENGTH["snakemake"] = time.monotonic() - began
     return repo
 
 
 @pytest.fixture(scope="module")
 def by_dvc(tmp_path_factory):
+    """The same pipeline through DVC, one job at a time (REFINENET_CORES=1): a second fresh run, in another job
+    order than Snakemake's -j2 run."""
     repo = smoke_copy(tmp_path_factory.mktemp("dvc"))
-    sh(repo, "dvc", "repro")
+    sh(repo, "dvc", "repro", env={"REFINENET_CORES": "1"})
     return repo
 
 
@@ -84,8 +63,11 @@ def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
 
 
 def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by_snakemake):
-    for name in (TABLE, "reports/table_synthetic.tex", "reports/per_cloud/table_synthetic.csv", "reports/metrics.json"):
-        assert (by_dvc / name).read_text() == (by_snakemake / name).read_text(), name
+    """Two fresh runs, -j1 through DVC and -j2 through Snakemake: every report file is bit-identical."""
+    reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
+    assert len(reports) == 4 * len(TABLES) + 1  # csv, tex, per-cloud csv, metrics record each; metrics.json
+    for name in reports:
+        assert (by_dvc / name).read_bytes() == (by_snakemake / name).read_bytes(), name
     assert "Nothing to be done" in snakemake(by_dvc, "-n").stdout
     second = sh(by_dvc, "dvc", "repro").stdout
     assert "Data and pipelines are up to date" in second
@@ -124,7 +106,7 @@ def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, 
 def test_bad_params_value_fails_with_one_line(by_snakemake):
     set_param(by_snakemake, "  pca_k: 100", "  pca_k: -5")
     try:
-        run = subprocess.run([sys.executable, "-m", "snakemake", "-n"], cwd=by_snakemake,
+        run = subprocess.run([sys.executable, "-m", "snakemake", "-n"], cwd=by_snakemake, env=isolated(by_snakemake),
                              capture_output=True, text=True)
     finally:
         set_param(by_snakemake, "  pca_k: -5", "  pca_k: 100")
@@ -213,3 +195,13 @@ def test_the_real_scan_setting_x8_runs_end_to_end(tmp_path_factory):
     table = pd.read_csv(repo / TABLE, index_col=0)
     assert table.loc["Refine-Net"].notna().all()
     assert "X = 8" in (repo / "reports/table_synthetic.tex").read_text()
+
+
+def test_runs_killed_anywhere_end_with_bit_identical_reports(by_snakemake, tmp_path):
+    """10 SIGKILLs at seeded moments through each tool (one during a write, one during training), each followed
+    by a restart: every report file equals the uninterrupted run's, and both tools have nothing left to do."""
+    results = kill_anywhere(["snakemake", "dvc"], kills=10, seed=2022, workdir=tmp_path, reference=by_snakemake,
+                            length=LENGTH["snakemake"])
+    (tmp_path / "kill_anywhere.json").write_text(json.dumps(results, indent=2) + "\n")  # kept for the report
+    for tool, result in results["tools"].items():
+        assert passed(result, 10), (tool, result)

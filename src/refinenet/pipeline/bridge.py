@@ -59,7 +59,9 @@ def run(name: str, cores: str) -> int:
     targets = step.targets(config.load())
     for path in prune(step, targets):
         print(f"removed orphan {path}")
-    cmd = [*SNAKEMAKE, "--cores", cores, "--allowed-rules", step.name, "--", *targets]
+    # No Snakemake lock: DVC holds the repository's while a stage runs, and a killed `dvc repro` must not leave
+    # a stale Snakemake lock that stops the next one.
+    cmd = [*SNAKEMAKE, "--cores", cores, "--nolock", "--allowed-rules", step.name, "--", *targets]
     return subprocess.run(cmd, env=_env()).returncode
 
 

@@ -1,0 +1,143 @@
+"""Kill anywhere: SIGKILL the smoke pipeline at seeded random moments, restart it each time as a user would, and
+compare every report file with an uninterrupted run's: they must be bit-identical.
+
+    python tests/kill_anywhere.py --tools snakemake dvc --kills 10 --seed 0 --json out.json
+
+The moments are spread over the length of the uninterrupted run. Two kills are aimed: the first one that finds a
+file being written (a `.NAME.*.tmp*` beside an output) and the first one that finds a training job past its first
+epoch (a checkpoint exists), so that the atomic writes and the training resumption are both exercised. A killed
+Snakemake leaves its lock behind: the restart runs `snakemake --unlock` first, as Snakemake's own message says. A
+killed `dvc repro` is simply run again (each DVC stage runs Snakemake without a lock of its own; DVC holds the
+repository's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import psutil
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from scratch import isolated, sh, smoke_copy  # noqa: E402
+
+POLL = 0.02
+COMMANDS = {"snakemake": [sys.executable, "-m", "snakemake", "-j2"], "dvc": ["dvc", "repro", "--quiet"]}
+
+
+def start(repo: Path, tool: str, log: Path) -> subprocess.Popen:
+    """The pipeline in a process group of its own, so one signal reaches every job it started."""
+    if tool == "snakemake":
+        subprocess.run([*COMMANDS[tool], "--unlock"], cwd=repo, capture_output=True, env=isolated(repo))
+    with open(log, "a") as out:
+        return subprocess.Popen(COMMANDS[tool], cwd=repo, stdout=out, stderr=subprocess.STDOUT,
+                                start_new_session=True, env=isolated(repo))
+
+
+def writing(repo: Path) -> bool:
+    """A job is writing an output: a temporary file of the atomic writer exists."""
+    return any(p.name.startswith(".") and ".tmp" in p.name for folder in ("results", "reports")
+               if (repo / folder).is_dir() for p in (repo / folder).rglob(".*"))
+
+
+def training_resumable(proc: subprocess.Popen, repo: Path) -> bool:
+    """A training job is running and has finished at least one epoch (its checkpoint exists)."""
+    try:
+        jobs = [" ".join(c.cmdline()) for c in psutil.Process(proc.pid).children(recursive=True)]
+    except psutil.Error:
+        return False
+    return any("stages.training" in j for j in jobs) and any((repo / "results/checkpoints").rglob("checkpoint.pt"))
+
+
+def kill_once(repo: Path, tool: str, delay: float, aims: dict[str, int], log: Path) -> str | None:
+    """Start the pipeline and kill its whole process group after `delay` seconds, or earlier when an aimed
+    situation arises that no kill has hit yet. Returns what the kill hit, or None when the run ended first."""
+    proc = start(repo, tool, log)
+    deadline = time.monotonic() + delay
+    hit = "timed"
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return None
+        if not aims["write"] and writing(repo):
+            hit = "write"
+            break
+        if not aims["training"] and training_resumable(proc, repo):
+            hit = "training"
+            break
+        time.sleep(POLL)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    aims[hit] = aims.get(hit, 0) + 1
+    return hit
+
+
+def report_files(repo: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(repo)): p.read_bytes() for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
+
+
+def passed(result: dict, kills: int) -> bool:
+    """Every kill happened, one of them during a write and one during training, and the run ended as if none had."""
+    return (result["kills"] == kills and result["during_write"] >= 1 and result["during_training"] >= 1
+            and not result["different_files"] and result["up_to_date"])
+
+
+def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, reference: Path | None = None,
+                  length: float | None = None) -> dict:
+    """Kill runs of each tool in fresh smoke copies under `workdir`; compare with `reference`, a finished
+    uninterrupted smoke run that took `length` seconds (made here when not given)."""
+    if reference is None:
+        reference = smoke_copy(workdir / "reference")
+        began = time.monotonic()
+        sh(reference, *COMMANDS["snakemake"])
+        length = time.monotonic() - began
+    expected = report_files(reference)
+    rng = random.Random(seed)
+    results = {"reference_seconds": round(length, 1), "report_files": len(expected), "tools": {}}
+    for tool in tools:
+        victim = smoke_copy(workdir / tool)
+        log = workdir / f"{tool}.log"
+        aims = {"write": 0, "training": 0, "timed": 0}
+        hits = []
+        for _ in range(kills):
+            hit = kill_once(victim, tool, rng.uniform(0.6, 1.2) * length / kills, aims, log)
+            if hit is not None:
+                hits.append(hit)
+        if tool == "snakemake":
+            sh(victim, *COMMANDS[tool], "--unlock")
+        sh(victim, *COMMANDS[tool])
+        got = report_files(victim)
+        different = sorted(name for name in expected.keys() | got.keys() if expected.get(name) != got.get(name))
+        up_to_date = ("Nothing to be done" in sh(victim, sys.executable, "-m", "snakemake", "-n").stdout
+                      and not json.loads(sh(victim, "dvc", "status", "--json").stdout or "{}"))
+        results["tools"][tool] = {"kills": len(hits), "during_write": aims["write"],
+                                  "during_training": aims["training"], "different_files": different,
+                                  "identical_files": len(expected) - len(different), "up_to_date": up_to_date}
+    return results
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tools", nargs="+", choices=list(COMMANDS), default=list(COMMANDS))
+    parser.add_argument("--kills", type=int, default=10)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", help="write the results here")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="kill_anywhere.") as tmp:
+        results = kill_anywhere(args.tools, args.kills, args.seed, Path(tmp))
+    text = json.dumps(results, indent=2)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    return 0 if all(passed(r, args.kills) for r in results["tools"].values()) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

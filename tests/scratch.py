@@ -1,0 +1,49 @@
+"""Scratch copies of the repository for end-to-end runs: the working tree (tracked and untracked, not ignored
+files) in a fresh git repository, with the smoke profile selected."""
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def isolated(cwd: Path, **extra: str) -> dict[str, str]:
+    """The environment for a command in a scratch copy: its own library first, not the checkout's (which the
+    editable install points at), so the copy runs the code it was made from."""
+    return {**os.environ, **extra,
+            "PYTHONPATH": os.pathsep.join([str(cwd / "src"), os.environ.get("PYTHONPATH", "")])}
+
+
+def sh(cwd: Path, *cmd: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """Run a command in a scratch copy (with `env` added to the environment); fail with its output's tail when it
+    exits non-zero."""
+    run = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, env=isolated(cwd, **(env or {})))
+    assert run.returncode == 0, f"{' '.join(cmd)} failed:\n{run.stdout[-3000:]}\n{run.stderr[-3000:]}"
+    return run
+
+
+def snakemake(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    return sh(cwd, sys.executable, "-m", "snakemake", *args)
+
+
+def set_param(repo: Path, old: str, new: str) -> None:
+    """Replace the first occurrence of `old` in the copy's params.yaml (which must hold it)."""
+    params = repo / "params.yaml"
+    text = params.read_text()
+    assert old in text
+    params.write_text(text.replace(old, new, 1))
+
+
+def smoke_copy(tmp: Path) -> Path:
+    """The working tree in a fresh git repository at `tmp`, profile smoke."""
+    files = sh(REPO, "git", "ls-files", "-co", "--exclude-standard").stdout.split()
+    for f in files:
+        if (REPO / f).is_file():
+            (tmp / f).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / f, tmp / f)
+    set_param(tmp, "profile: cpu", "profile: smoke")
+    sh(tmp, "git", "init", "-q")
+    return tmp
