@@ -24,7 +24,7 @@ def test_knn_patch_of_a_plane_is_flat_in_the_frame_with_unit_radius(tilted_plane
     points, nf = tilted_plane
     frames = normal_frames(nf)
     index = np.arange(0, 2000, 7)
-    patches = point_patches(points, k=50, frames=frames, index=index)
+    patches = point_patches(points, k=50, frames=frames[index], index=index)
     assert patches.shape == (len(index), 50, 3) and patches.dtype == np.float32
     np.testing.assert_allclose(patches[:, :, 2], 0.0, atol=1e-6)
     np.testing.assert_allclose(np.linalg.norm(patches, axis=2).max(axis=1), 1.0, atol=1e-6)

@@ -50,13 +50,43 @@ _GOLDEN = 0x9E3779B97F4A7C15
 
 # --------------------------------------------------------------------------------------------------- A.1
 
-def surface_variation(eigenvalues: np.ndarray) -> np.ndarray:
-    """s = l1 / (l1 + l2 + l3) per point, divided by its global maximum so that s lies in [0, 1]."""
+def raw_variation(eigenvalues: np.ndarray) -> np.ndarray:
+    """l1 / (l1 + l2 + l3) per point (eigenvalues of the k0-patch covariance, ascending)."""
     lam = np.clip(eigenvalues, 0.0, None)
     total = lam.sum(axis=1)
-    s = np.divide(lam[:, 0], total, out=np.zeros(len(lam)), where=total > 0)
-    top = s.max(initial=0.0)
-    return s / top if top > 0 else s
+    return np.divide(lam[:, 0], total, out=np.zeros(len(lam)), where=total > 0)
+
+
+def surface_variation(eigenvalues: np.ndarray) -> np.ndarray:
+    """s = l1 / (l1 + l2 + l3) per point, divided by its global maximum so that s lies in [0, 1]."""
+    raw = raw_variation(eigenvalues)
+    return _normalised(raw, raw.max(initial=0.0))
+
+
+def _normalised(raw: np.ndarray, top: float) -> np.ndarray:
+    return raw / top if top > 0 else raw
+
+
+@dataclass(frozen=True)
+class Candidacy:
+    """The two whole-cloud statistics of A.1: the largest raw surface variation and the threshold tau_s on the
+    normalised one. A tile of a large cloud takes them from the whole cloud (`cloud_candidacy`), so that a point
+    is a candidate in its tile exactly when it is one in the whole cloud."""
+
+    top: float
+    threshold: float
+
+
+def cloud_candidacy(raw: np.ndarray, config: MFPSConfig) -> Candidacy:
+    """Candidacy of a cloud from the `raw_variation` of all its points."""
+    top = float(raw.max(initial=0.0))
+    return Candidacy(top, variation_threshold(_normalised(raw, top), config))
+
+
+def point_variation(points: np.ndarray, config: MFPSConfig, index: np.ndarray) -> np.ndarray:
+    """raw_variation of points[index] over their k0 nearest neighbours in `points`."""
+    neighbours = knn(points, config.k0, query=points[index], with_distances=False, index_dtype=np.int32)[1]
+    return raw_variation(smallest_eigenvectors(covariances(points, neighbours)[1])[0])
 
 
 def l1_trend_filter(y: np.ndarray, lam: float) -> np.ndarray:
@@ -249,15 +279,17 @@ class PatchFits:
 
 def fit_patches(points: np.ndarray, neighbours: np.ndarray, centres: np.ndarray, sigma: np.ndarray,
                 candidate: np.ndarray, trials: int, seed: int, workers: int = 1,
-                on_chunk: Callable[[int], None] | None = None) -> PatchFits:
+                on_chunk: Callable[[int], None] | None = None, ids: np.ndarray | None = None) -> PatchFits:
     """Best-of-R random plane of each patch Q = kNN_k(i), i in `centres` (A.3), and E_c for every candidate
-    c in Q (A.4). `neighbours` is (N, k): the scale is its width. `sigma` must be positive."""
+    c in Q (A.4). `neighbours` is (N, k): the scale is its width. `sigma` must be positive. `ids` name the
+    points in the trial hash (default: their positions), so a tile draws the trials of the whole cloud."""
     k = neighbours.shape[1]
     step = max(1, PATCH_CHUNK_ELEMENTS // (trials * k))
     coords = np.ascontiguousarray(points.T)
 
     def run(sl: slice) -> tuple[np.ndarray, ...]:
-        result = _fit_chunk(coords, neighbours, centres[sl], sigma, candidate, trials, seed)
+        result = _fit_chunk(coords, neighbours, centres[sl], sigma, candidate, trials, seed,
+                            centres[sl] if ids is None else ids[centres[sl]])
         if on_chunk is not None:
             on_chunk(sl.stop - sl.start)
         return result
@@ -276,7 +308,7 @@ def fit_patches(points: np.ndarray, neighbours: np.ndarray, centres: np.ndarray,
 
 
 def _fit_chunk(coords: np.ndarray, neighbours: np.ndarray, centres: np.ndarray, sigma: np.ndarray,
-               candidate: np.ndarray, trials: int, seed: int) -> tuple[np.ndarray, ...]:
+               candidate: np.ndarray, trials: int, seed: int, keys: np.ndarray) -> tuple[np.ndarray, ...]:
     """One batch of patches, from the cloud's coordinates as (3, N); every result row depends on its own
     patch only, so results do not depend on the chunking. Arrays are laid out by component, (3, b, ...)."""
     nb = neighbours[centres]
@@ -288,7 +320,7 @@ def _fit_chunk(coords: np.ndarray, neighbours: np.ndarray, centres: np.ndarray, 
     # Search the R trials in float32, in units of tau: the 4-point LS planes through the centre (the origin)
     # and 3 random neighbours, as (3, b, R), and their scores sum_q exp(-((q - m).n / tau)^2), from one
     # (R x 4)(4 x k) product per patch. Only the winner's plane is refitted in float64.
-    draws = trial_indices(seed, k, centres, trials) + (np.arange(b) * k)[:, None, None]
+    draws = trial_indices(seed, k, keys, trials) + (np.arange(b) * k)[:, None, None]
     scaled = (q / tau).astype(np.float32).reshape(3, b * k)
     m, n = _four_point_planes(np.take(scaled, draws.transpose(2, 0, 1), axis=1))
     d = np.einsum("ibr,ibr->br", m, n)  # the plane is {y : y.n = d}; the centre lies |d| tau from it
@@ -411,12 +443,17 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
 # --------------------------------------------------------------------------------------------------- all
 
 def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
-                 workers: int | None = None, stats: dict[str, float] | None = None) -> np.ndarray:
+                 workers: int | None = None, stats: dict[str, float] | None = None,
+                 length: float | None = None, ids: np.ndarray | None = None,
+                 candidacy: Candidacy | None = None) -> np.ndarray:
     """Unit, unoriented MFPS normals (N, 3) of a cloud (docs/algorithm.md §2).
 
     `workers` threads fit the patches (default: the cores this process may use); the result does not
     depend on it. `progress` shows a bar per step. `stats`, when given, receives the wall and CPU seconds of
     each step ("seconds <step>", "cpu seconds <step>") and the numbers of candidates and of fitted patches.
+    A tile of a larger cloud passes the whole cloud's `length` (l_d, default the bounding-box diagonal),
+    its points' `ids` in the whole cloud and the whole cloud's `candidacy`; its points then get the normals
+    they get in the whole cloud, wherever their neighbourhoods lie inside the tile.
     """
     k0, k_max, k_bw = config.k0, config.scales[-1], config.k_bw
     points = check_array("points", np.ascontiguousarray(points, dtype=np.float64), "points",
@@ -432,8 +469,9 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
     with step("A.1 candidates"):
         centroids, covs = covariances(points, neighbours[:, :k0])
         eigenvalues, normals = smallest_eigenvectors(covs)
-        variation = surface_variation(eigenvalues)
-        candidates = np.flatnonzero(variation > variation_threshold(variation, config))
+        raw = raw_variation(eigenvalues)
+        candidacy = cloud_candidacy(raw, config) if candidacy is None else candidacy
+        candidates = np.flatnonzero(_normalised(raw, candidacy.top) > candidacy.threshold)
         candidate = np.zeros(len(points), dtype=bool)
         candidate[candidates] = True
     stats["candidates"] = len(candidates)
@@ -441,14 +479,14 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
         return normals
     with step("A.2 bandwidth"):
         sigma = residual_bandwidth(points, neighbours[:, :k0], centroids, normals, neighbours[:, :k_bw])
-        sigma = np.maximum(sigma, SIGMA_FLOOR * bbox_diagonal(points))
+        sigma = np.maximum(sigma, SIGMA_FLOOR * (bbox_diagonal(points) if length is None else length))
     fits = []
     for k in config.scales:
         centres = np.flatnonzero(_touches(candidate, neighbours[:, :k]))
         stats[f"patches k={k}"] = len(centres)
         with step(f"A.3 patches k={k}", len(centres)) as bar:
             fits.append(fit_patches(points, neighbours[:, :k], centres, sigma, candidate, config.trials,
-                                    config.seed, workers, bar.update))
+                                    config.seed, workers, bar.update, ids))
     with step("A.5 selection"):
         eta = eta_weights(config.scales, config.eta, config.beta)
         offsets = np.cumsum([0] + [len(f.m) for f in fits[:-1]], dtype=np.int32)

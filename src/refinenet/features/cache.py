@@ -8,6 +8,7 @@ are cheap.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -57,20 +58,34 @@ class Features:
 
 
 def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig,
-                     progress: bool = False) -> Features:
-    """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part)."""
+                     progress: bool = False, length: float | None = None,
+                     centres: np.ndarray | None = None, workers: int = 1) -> Features:
+    """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part).
+
+    `length` is l_d, the unit of r_f and hmp_extent (default: the bounding-box diagonal; `geometry.scale`).
+    `centres` limits the rows to those points (a tile's own points; its margin only lends neighbours).
+    `workers` threads build the height maps (numpy releases the GIL); each map depends on its point alone, so
+    the result does not depend on it.
+    """
     points = np.asarray(points, dtype=np.float64)
+    length = bbox_diagonal(points) if length is None else length
+    centres = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
-                          sigma_r=config.sigma_r, include_initial=config.include_initial)
+                          sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
     frames = normal_frames(nf, config.frame_mode)
     tree = build_tree(points)
-    extent = None if config.hmp_extent is None else config.hmp_extent * bbox_diagonal(points)
-    heights = np.empty((len(points), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
-    for start in tqdm(range(0, len(points), HEIGHT_STEP), desc="height maps", disable=not progress):
-        index = np.arange(start, min(start + HEIGHT_STEP, len(points)))
-        heights[index] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
-                                     tree=tree, index=index)
-    return Features(nf=nf, frames=frames.astype(np.float32), heights=heights)
+    extent = None if config.hmp_extent is None else config.hmp_extent * length
+    heights = np.empty((len(centres), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
+
+    def fill(rows: slice) -> None:
+        heights[rows] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
+                                    tree=tree, index=centres[rows])
+
+    steps = [slice(start, start + HEIGHT_STEP) for start in range(0, len(centres), HEIGHT_STEP)]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for _ in tqdm(pool.map(fill, steps), total=len(steps), desc="height maps", disable=not progress):
+            pass
+    return Features(nf=nf[centres], frames=frames[centres].astype(np.float32), heights=heights)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:

@@ -28,10 +28,12 @@ PAIRS_PER_CHUNK = CHUNK_ELEMENTS // 4
 
 def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
                      sigma_s: Sequence[float] = (1.0, 2.0), sigma_r: Sequence[float] = (0.1, 0.2, 0.35, 0.5),
-                     include_initial: bool = True, orient_with_gt: np.ndarray | None = None) -> np.ndarray:
+                     include_initial: bool = True, orient_with_gt: np.ndarray | None = None,
+                     length: float | None = None) -> np.ndarray:
     """Filtered normals `nf` (N x 3X, float32), ordered [n0,] f(s1, r1), .., f(s1, rR), f(s2, r1), ..
 
-    Ball radius R_f = r_f * l_d (the point itself included), one pass over the *initial* normals:
+    Ball radius R_f = r_f * l_d (the point itself included; l_d is `length`, by default the bounding-box
+    diagonal, `geometry.scale`), one pass over the *initial* normals:
     w_ij = exp(-|p_i - p_j|^2 / (sigma_s R_f / 2)^2) * exp(-2 (1 - |n_i . n_j|) / (2 sigma_r^2)).
 
     Clean-room signs (default): each n_j is flipped to n_i's side before it is summed, so f_i depends on no
@@ -45,7 +47,7 @@ def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
     if orient_with_gt is not None:
         n0 = target_sign(n0, np.asarray(orient_with_gt, dtype=np.float64))
     n0 = n0.astype(np.float32)
-    radius = r_f * bbox_diagonal(points)
+    radius = r_f * (bbox_diagonal(points) if length is None else length)
     spatial_coef = np.asarray([(s * radius / 2) ** -2 for s in sigma_s], dtype=np.float32)
     range_coef = np.asarray([1.0 / s ** 2 for s in sigma_r], dtype=np.float32)  # 2(1 - |cos|) / (2 sigma_r^2)
 

@@ -21,12 +21,13 @@ from refinenet.geometry.neighbors import build_tree, chunks, knn
 
 def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: int = 100, radius: float = 0.05,
                   max_points: int = 300, rng: np.random.Generator | None = None, frames: np.ndarray | None = None,
-                  index: np.ndarray | None = None, tree: cKDTree | None = None) -> np.ndarray:
+                  index: np.ndarray | None = None, tree: cKDTree | None = None,
+                  length: float | None = None) -> np.ndarray:
     """Patches (M x P x 3, float32) around points[index] (all points when None); P = k or max_points.
 
     knn: the k nearest points (self included), divided by the distance to the k-th. ball: radius is a fraction of
-    l_d; a new random subset is drawn from `rng` on each call. `frames` (N x 3 x 3, the whole cloud's) rotates each
-    patch into its point's frame.
+    l_d (`length`, by default the bounding-box diagonal); a new random subset is drawn from `rng` on each call.
+    `frames` (M x 3 x 3, those of the indexed points) rotates each patch into its point's frame.
     """
     points = np.asarray(points, dtype=np.float64)
     index = np.arange(len(points)) if index is None else np.asarray(index)
@@ -35,7 +36,7 @@ def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: i
         dist, idx = knn(points, k, tree=tree, query=points[index])
         scale = dist[:, -1]
     elif mode == "ball":
-        ball = radius * bbox_diagonal(points)
+        ball = radius * (bbox_diagonal(points) if length is None else length)
         idx = _ball_subsets(points, index, ball, max_points, rng, tree)
         scale = np.full(len(index), ball)
     else:
@@ -44,7 +45,7 @@ def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: i
     patches = np.empty((*idx.shape, 3), dtype=np.float32)
     for sl in chunks(len(index), idx.shape[1]):
         local = np.stack([x[idx[sl]] - x[index[sl], None] for x in axes], axis=2) / scale[sl, None, None]
-        patches[sl] = local if frames is None else to_local(frames[index[sl]], local)
+        patches[sl] = local if frames is None else to_local(frames[sl], local)
     return patches
 
 

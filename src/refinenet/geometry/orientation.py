@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
-from refinenet.geometry.neighbors import knn
+from refinenet.geometry.neighbors import chunks, knn
 
 #: Neighbours per point in the propagation graph.
 MST_K = 12
@@ -35,11 +35,18 @@ def orient_mst(points: np.ndarray, normals: np.ndarray, k: int = MST_K) -> np.nd
     normals = np.asarray(normals, dtype=np.float64)
     n = len(points)
     k = min(k + 1, n)
-    neighbours = knn(points, k, with_distances=False)[1][:, 1:]
-    rows = np.repeat(np.arange(n), k - 1)
-    cols = neighbours.ravel()
-    cost = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + COST_FLOOR
-    tree = minimum_spanning_tree(coo_matrix((cost, (rows, cols)), shape=(n, n)).tocsr())
+    # The k-NN graph as CSR (row i: its k - 1 neighbours), built without per-edge index or normal copies: at
+    # 10M points every array of one entry per edge costs about 1 GB.
+    cols = knn(points, k, with_distances=False, index_dtype=np.int32)[1][:, 1:].ravel()
+    cost = np.empty(len(cols))
+    for sl in chunks(n, k):
+        edges = slice(sl.start * (k - 1), sl.stop * (k - 1))
+        own = np.repeat(normals[sl], k - 1, axis=0)
+        cost[edges] = 1.0 - np.abs(np.einsum("ij,ij->i", own, normals[cols[edges]])) + COST_FLOOR
+    graph = csr_matrix((cost, cols, np.arange(0, len(cols) + 1, k - 1)), shape=(n, n))
+    del cost, cols
+    tree = minimum_spanning_tree(graph)
+    del graph
     tree = tree + tree.T
     n_parts, part = connected_components(tree, directed=False)
     oriented = normals.copy()

@@ -33,38 +33,46 @@ class PreparedCloud:
     """A cloud prepared for the network: its cached features and cluster ids; ground-truth normals only for
     training clouds (`prepare`).
 
-    The k-d tree is built once here and reused by every batch's patch query.
+    Feature rows may cover only some of the points (`centres`): a tile of a large cloud computes the network
+    inputs of its own points while its margin supplies their neighbours. The k-d tree is built once here and
+    reused by every batch's patch query.
     """
 
     points: np.ndarray
     """(N, 3) positions."""
     features: Features
-    """Cached nf, frames and heights (`refinenet.features.cache`)."""
+    """Cached nf, frames and heights (`refinenet.features.cache`), one row per centre."""
     clusters: np.ndarray
-    """(N,) cluster ids, 0..Kc-1."""
+    """(M,) cluster ids of the centres, 0..Kc-1."""
     normals: np.ndarray | None = None
-    """(N, 3) ground-truth normals (unoriented; normalised here), or None at test time."""
+    """(M, 3) ground-truth normals of the centres (unoriented; normalised here), or None at test time."""
+    centres: np.ndarray | None = None
+    """(M,) the point of each feature row; None: every point, in order."""
+    length: float | None = None
+    """l_d of ball patches (`geometry.scale`); None: the bounding-box diagonal of `points`."""
     tree: cKDTree = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.points = np.asarray(self.points, dtype=np.float64)
         self.clusters = np.asarray(self.clusters)
-        n = len(self.points)
-        if self.points.shape != (n, 3) or len(self.features) != n or self.clusters.shape != (n,):
-            raise ValueError(f"inconsistent cloud: points {self.points.shape}, {len(self.features)} feature rows, "
-                             f"clusters {self.clusters.shape}")
+        self.centres = np.arange(len(self.points)) if self.centres is None else np.asarray(self.centres)
+        m = len(self.centres)
+        if self.points.shape != (len(self.points), 3) or len(self.features) != m or self.clusters.shape != (m,):
+            raise ValueError(f"inconsistent cloud: points {self.points.shape}, {m} centres, {len(self.features)} "
+                             f"feature rows, clusters {self.clusters.shape}")
         if self.normals is not None:
             normals = np.asarray(self.normals, dtype=np.float32)
-            if normals.shape != (n, 3):
-                raise ValueError(f"ground-truth normals have shape {normals.shape}, expected ({n}, 3)")
+            if normals.shape != (m, 3):
+                raise ValueError(f"ground-truth normals have shape {normals.shape}, expected ({m}, 3)")
             self.normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
         self.tree = build_tree(self.points)
 
 
-def prepare(points: np.ndarray, features: Features, model: ClusterModel,
-            normals: np.ndarray | None = None) -> PreparedCloud:
-    """A cloud ready for training (with ground-truth `normals`) or inference: its points assigned to clusters."""
-    return PreparedCloud(points, features, cloud_clusters(model, features.nf, features.frames), normals)
+def prepare(points: np.ndarray, features: Features, model: ClusterModel, normals: np.ndarray | None = None,
+            centres: np.ndarray | None = None, length: float | None = None) -> PreparedCloud:
+    """A cloud ready for training (with ground-truth `normals`) or inference: its centres assigned to clusters."""
+    return PreparedCloud(points, features, cloud_clusters(model, features.nf, features.frames), normals, centres,
+                         length)
 
 
 @dataclass(frozen=True)
@@ -100,7 +108,7 @@ class Inputs:
 
 def make_inputs(cloud: PreparedCloud, index: np.ndarray, patch: PatchConfig, network: NetworkConfig,
                 rng: np.random.Generator) -> Inputs:
-    """The inputs of points `index` of one cloud; patches and heights only if the network reads them.
+    """The inputs of feature rows `index` of one cloud; patches and heights only if the network reads them.
 
     `rng` draws the ball-mode subsets (unused by knn patches).
     """
@@ -110,8 +118,8 @@ def make_inputs(cloud: PreparedCloud, index: np.ndarray, patch: PatchConfig, net
     points = None
     if network.uses_points:
         points = point_patches(cloud.points, patch.mode, k=patch.k, radius=patch.radius,
-                               max_points=patch.max_points, rng=rng, frames=features.frames, index=index,
-                               tree=cloud.tree)
+                               max_points=patch.max_points, rng=rng, frames=frames, index=cloud.centres[index],
+                               tree=cloud.tree, length=cloud.length)
     heights = features.heights[index].astype(np.float32) if network.uses_hmps else None
     target = None
     if cloud.normals is not None:
