@@ -41,6 +41,8 @@ HISTORY_DIR = f"results/history/{REFINENET}"
 HISTORY = f"{HISTORY_DIR}/cluster_{{cluster}}.csv"
 #: Resumable training state, outside every step's outputs so that neither tool clears it before a rerun.
 CHECKPOINT_DIR = f"results/checkpoints/{REFINENET}"
+#: The shipped release (`network.release`): committed with the package, so it is not DVC-cached.
+RELEASE = "src/refinenet/shipped"
 TABLE_FILES = {"csv": "reports/{table}.csv", "tex": "reports/{table}.tex", "per_cloud": "reports/per_cloud/{table}.csv"}
 TABLE_METRICS = "reports/metrics/{table}.json"
 METRICS = "reports/metrics.json"
@@ -49,6 +51,14 @@ METRICS = "reports/metrics.json"
 def clouds(params: Params, split: str | None = None) -> list[CloudSpec]:
     """The run's clouds (optionally of one split)."""
     return [c for c in list_clouds(params.data, params.noise) if split in (None, c.split)]
+
+
+def check_keys(params: Params) -> list[str]:
+    """One test cloud per category (the first): where the release measures what half precision changes."""
+    first: dict[str, str] = {}
+    for c in clouds(params, "test"):
+        first.setdefault(c.category, c.key)
+    return list(first.values())
 
 
 def normals_path(method: str, cloud: str) -> str:
@@ -186,6 +196,14 @@ STEPS: dict[str, Step] = {s.name: s for s in (
         outs=(f"results/normals/{REFINENET}/test",),
         targets=lambda p: [normals_path(REFINENET, c.key) for c in clouds(p, "test")],
     ),
+    Step(
+        name="release", family="release",
+        modules=(*_NETWORK, "network.inference", "network.release", "geometry.scale", *_DATA, *_STAGE),
+        keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches", "training",
+              "inference", "evaluation"),
+        deps=("results/clouds/train", "results/clouds/test", "results/features/test", "results/clusters", MODEL_DIR),
+        outs=(RELEASE,), targets=lambda p: [RELEASE],
+    ),
     *(_table_step(name, table) for name, table in TABLES.items()),
     Step(
         name="metrics", family="metrics", modules=(*_TABLE, *_STAGE),
@@ -250,7 +268,7 @@ def dvc_yaml(raw: dict[str, Any]) -> dict[str, Any]:
             "cmd": f"python -m refinenet.pipeline.bridge run {step.name}",
             "deps": [*step.code, *step.deps],
             "params": tracked_keys(raw, step),
-            "outs": [{o: {"cache": False}} if o.startswith("reports/") else o for o in step.outs],
+            "outs": [{o: {"cache": False}} if o.startswith(("reports/", RELEASE)) else o for o in step.outs],
         }
         if step.metrics:
             stage["metrics"] = [{m: {"cache": False}} for m in step.metrics]

@@ -1,0 +1,181 @@
+"""The shipped networks: a run's per-cluster networks and cluster model in one file that the `refinenet normals`
+command loads without training, with the settings it needs and a model card.
+
+A release is self-contained: it carries the run's resolved params, so a user's cloud gets exactly the MFPS,
+features and patches that the networks were trained on, wherever the command runs. Weights are stored in half
+precision (the export measures what that changes); they are computed in float32 after loading.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from refinenet.atomic import atomic_path, write_text
+from refinenet.config import InferenceConfig, Params, PatchConfig
+from refinenet.errors import InputError
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.features.cache import Features
+from refinenet.network.clustering import ClusterModel
+from refinenet.network.inference import refine_normals
+from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, fuse_batch_norm
+from refinenet.network.training import network_fingerprint
+
+#: Where the package keeps its shipped release (the pipeline's `release` step writes it).
+SHIPPED = Path(__file__).resolve().parents[1] / "shipped"
+BUNDLE, CARD_JSON, CARD_MD = "networks.pt", "model_card.json", "MODEL_CARD.md"
+#: Format of the bundle; a loader refuses other versions rather than misreading them.
+FORMAT = 1
+
+
+@dataclass(frozen=True)
+class Release:
+    """What `load_release` gives: the run's settings, its cluster model and one float32 network per cluster."""
+
+    params: Params
+    cluster_model: ClusterModel
+    networks: dict[int, RefineNet]
+    card: dict[str, Any]
+
+    @property
+    def spacing_ratio(self) -> float:
+        """Median point spacing / bounding-box diagonal of the training clouds (`geometry.scale`)."""
+        return float(self.card["training_data"]["spacing_ratio"])
+
+
+def half(state: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """A state dict with its floating tensors in float16 (integer buffers such as BN counters kept)."""
+    return {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
+
+
+def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterModel,
+           states: Mapping[int, Mapping[str, torch.Tensor]], network_json: str, card: dict[str, Any]) -> None:
+    """Write the bundle and its model card (JSON and Markdown) into `folder`, each file atomically.
+
+    `resolved` is the run's params as resolved from params.yaml; `states` the float32 weights per trained cluster;
+    `card` what the export measured (training data, validation errors, the half-precision check).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    bundle = {
+        "format": FORMAT,
+        "params": json.dumps(resolved, sort_keys=True),
+        "network": network_json,
+        "cluster_model": {name: torch.from_numpy(getattr(cluster_model, name))
+                          for name in ("mean", "components", "centres")},
+        "networks": {str(c): half(state) for c, state in states.items()},
+    }
+    with atomic_path(folder / BUNDLE) as tmp:
+        torch.save(bundle, tmp)
+    write_text(folder / CARD_JSON, json.dumps(card, indent=2, sort_keys=True) + "\n")
+    write_text(folder / CARD_MD, model_card_markdown(card))
+
+
+def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu", fuse: bool = True,
+                 with_networks: bool = True) -> Release:
+    """The release in `folder` (default: the shipped one), networks in float32 and eval mode on `device`
+    (none without `with_networks`: the settings alone serve the estimators that need no network)."""
+    folder = Path(folder)
+    path = folder / BUNDLE
+    if not path.is_file():
+        raise InputError(path, "no trained networks here (run `snakemake -j2 release` to export a run's)")
+    try:
+        bundle = torch.load(path, map_location="cpu", weights_only=True)
+        card = json.loads((folder / CARD_JSON).read_text())
+    except (OSError, RuntimeError, ValueError, EOFError) as err:
+        raise InputError(path, f"not a Refine-Net release ({str(err).splitlines()[0]})") from None
+    if not isinstance(bundle, dict) or bundle.get("format") != FORMAT:
+        raise InputError(path, f"not a Refine-Net release of format {FORMAT}")
+    params = Params.from_resolved(json.loads(bundle["params"]), str(path))
+    network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v
+                               for k, v in json.loads(bundle["network"]).items()})
+    if network_fingerprint(network) != bundle["network"]:
+        raise InputError(path, "the network description does not round-trip")
+    cluster_model = ClusterModel(**{k: v.numpy() for k, v in bundle["cluster_model"].items()})
+    networks = {}
+    for c, state in bundle["networks"].items() if with_networks else ():
+        net = RefineNet(network)
+        net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+        net = net.to(device).eval()
+        networks[int(c)] = fuse_batch_norm(net) if fuse else net
+    return Release(params, cluster_model, networks, card)
+
+
+def half_precision_change(clouds: Sequence[tuple[np.ndarray, Features]], cluster_model: ClusterModel,
+                          networks: Mapping[int, RefineNet], patch: PatchConfig, config: InferenceConfig,
+                          sample: int, seed: int) -> dict[str, float]:
+    """How much storing the weights in float16 changes the refined normals: the unoriented angle between the
+    outputs of `networks` and of their float16-rounded copies on `sample` random points of each cloud."""
+    rounded = {}
+    for c, net in networks.items():
+        copy = RefineNet(net.config)
+        copy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in half(net.state_dict()).items()})
+        rounded[c] = copy
+    rng = np.random.default_rng(seed)
+    angles = []
+    for points, features in clouds:
+        rows = np.sort(rng.choice(len(features), min(sample, len(features)), replace=False))
+        subset = Features(nf=features.nf[rows], frames=features.frames[rows], heights=features.heights[rows])
+        a, b = (refine_normals(points, subset, cluster_model, nets, patch, config, centres=rows)
+                for nets in (networks, rounded))
+        angles.append(unoriented_angles(a, b))
+    angles = np.concatenate(angles)
+    return {"points": int(len(angles)), "mean_deg": float(angles.mean()), "max_deg": float(angles.max())}
+
+
+def parameter_counts(network: RefineNet, n_networks: int) -> dict[str, int]:
+    """Parameters per cluster network and in total."""
+    per = count_parameters(network)
+    return {"per_cluster": per, "total": per * n_networks}
+
+
+def model_card_markdown(card: dict[str, Any]) -> str:
+    """The model card as Markdown, from the card's JSON fields."""
+    data, check = card["training_data"], card["half_precision"]
+    lines = [
+        "# Model card: Refine-Net networks shipped with this package",
+        "",
+        f"Exported by the pipeline's `release` step from a run of profile **{card['profile']}** "
+        f"(params fingerprint `{card['params_fingerprint']}`). Retrain and re-export with "
+        "`snakemake -j2 release` (or `dvc repro release`); `refinenet info` prints this card.",
+        "",
+        "## Networks",
+        "",
+        f"- Architecture: {card['network']['preset']} preset, features {card['network']['features']}, "
+        f"connection {card['network']['connection']}; X = {card['n_normals']} normals, Kc = {card['n_clusters']} "
+        "clusters, one network per cluster.",
+        f"- Parameters: {card['parameters']['per_cluster']:,} per cluster network, "
+        f"{card['parameters']['total']:,} in total; stored in float16, run in float32.",
+        f"- Half precision: on {check['points']:,} test points, the float16 weights change the refined normals by "
+        f"{check['mean_deg']:.2e} deg on average and {check['max_deg']:.2e} deg at most.",
+        "",
+        "## Training data",
+        "",
+        f"- Source: {data['source']}; {data['clouds']} training clouds of {data['points_per_cloud']:,} points, "
+        f"Gaussian noise {', '.join(map(str, data['noise_percent']))}% of the bounding-box diagonal.",
+        "- Training: " + ", ".join(f"{k} {v}" for k, v in card["training"].items()
+                                   if k not in ("device", "threads", "seed")) + ".",
+        "",
+        "## Validation error (held-out points of the training clouds, unoriented, degrees)",
+        "",
+        "| cluster | training points | validation points | best epoch | epochs | validation RMSE |",
+        "|---|---|---|---|---|---|",
+        *(f"| {c} | {r['train_points']:,} | {r['val_points']:,} | {r['best_epoch']} | {r['epochs']} | "
+          f"{r['best_val_rmse_deg']:.2f} |" for c, r in sorted(card["clusters"].items(), key=lambda i: int(i[0]))),
+        "",
+        "## Scale",
+        "",
+        "The paper's radii (filter ball r_f, ball patches, height-map extent) are fractions of l_d, the bounding-box",
+        "diagonal. On a user's cloud `refinenet normals` derives l_d from the point spacing instead (`--scale "
+        "spacing`, the default): l_d = median distance to the 16th neighbour / "
+        f"{data['spacing_ratio']:.5f}, the ratio of the training clouds, so a radius holds as many points as in",
+        "training whatever the cloud's size or units. `--scale diagonal` uses the paper's definition.",
+        "",
+    ]
+    return "\n".join(lines)

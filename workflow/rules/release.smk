@@ -1,0 +1,28 @@
+# The shipped networks (src/refinenet/shipped): the trained networks, the cluster model and the run's settings in
+# one file that `refinenet normals` loads without training, with a model card. Committed to git, not DVC-cached.
+
+
+rule release:
+    message:
+        "export the trained networks as the release of profile {P.profile}"
+    input:
+        code=wf.STEPS["release"].code,
+        clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+        clusters=wf.CLUSTER_MODEL,
+        networks=[wf.NETWORK.format(cluster=c) for c in CLUSTERS],
+        check_clouds=[wf.CLOUD.format(cloud=key) for key in wf.check_keys(P)],
+        check_features=[wf.FEATURES.format(cloud=key) for key in wf.check_keys(P)],
+    output:
+        directory(wf.RELEASE),
+    params:
+        tracked=tracked("release"),
+    log:
+        "logs/release.log",
+    benchmark:
+        "logs/release.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
+    shell:
+        "python -m stages.release --clouds {input.clouds} --clusters {input.clusters} --networks {input.networks}"
+        " --check-clouds {input.check_clouds} --check-features {input.check_features} --out {output}"
+        " 2>&1 | tee {log}"
