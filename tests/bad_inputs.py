@@ -24,7 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
+from refinenet.data.io import POINT_FILE_SUFFIXES
+
 ERROR, VALID = "error", "valid"
+#: The user command, as an entry point: `refinenet normals` (a subprocess, like the stage scripts).
+CLI = "cli.normals"
 KINDS = ("cloud", "normals", "mesh", "pcpnet", "params")
 #: Points of every usable cloud: more than the largest neighbourhood of params.yaml (MFPS: 1.5 x 150 = 225).
 N_POINTS = 300
@@ -302,13 +306,14 @@ def _cloud_cases() -> list[Case]:
         Case("folder.xyz", "cloud", _directory, ERROR, "", note="a directory named like a cloud"),
         Case("missing.xyz", "cloud", None, ERROR, "not found"),
         Case("unreadable.xyz", "cloud", _unreadable(_rows(six)), ERROR, "", root_skip=True),
-        Case("cloud.txt", "cloud", _rows(six), ERROR, "unsupported"),
+        Case("cloud.las", "cloud", _rows(six), ERROR, "unsupported"),
         Case("no suffix", "cloud", _rows(six), ERROR, "unsupported"),
         # --- text clouds: valid but degenerate
         Case("crlf.xyz", "cloud", _xyz(six, end="\r\n"), VALID, note="Windows line ends", all_stages=True),
         Case("bom.xyz", "cloud", lambda p: p.write_bytes(b"\xef\xbb\xbf" + _rows(six).encode()), VALID,
              note="UTF-8 byte-order mark (Windows editors)", all_stages=True),
         Case("tabs.xyz", "cloud", _xyz(six, sep=" \t "), VALID, note="tabs and spaces mixed"),
+        Case("cloud.txt", "cloud", _rows(six), VALID, note="a text table named .txt, as many tools export it"),
         Case("exponents.xyz", "cloud", _xyz(six, fmt="{:.6E}"), VALID),
         Case("UPPER.XYZ", "cloud", _xyz(six), VALID, note="upper-case suffix"),
         Case("my cloud with spaces.xyz", "cloud", _xyz(six), VALID),
@@ -529,8 +534,8 @@ READERS = {
     "params": ("config.load",),
 }
 #: Entry points that need a neighbourhood of k points (a `needs_k` case is an error only there).
-NEEDS_K = frozenset({"io.read_cloud", "stages.baselines", "stages.mfps", "stages.features"})
-SOURCE_SUFFIXES = {"points source": (".xyz", ".ply", ".pcd", ".npy"), "meshes source": (".off", ".obj", ".ply")}
+NEEDS_K = frozenset({"io.read_cloud", "stages.baselines", "stages.mfps", "stages.features", CLI})
+SOURCE_SUFFIXES = {"points source": POINT_FILE_SUFFIXES, "meshes source": (".off", ".obj", ".ply")}
 
 
 def expected(case: Case, entry: str) -> str:
@@ -554,6 +559,8 @@ def entry_points(case: Case) -> list[str]:
         if entry == "io.read_cloud (sibling)" and suffix != ".normals":
             continue
         entries.append(entry)
+    if case.kind in ("cloud", "normals"):
+        entries.append(CLI)  # a cloud as its input; a normals file as --initial
     if case.kind == "cloud":
         entries.append("stages.baselines")
         if case.all_stages:

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import yaml
 from bad_inputs import (
+    CLI,
     ERROR,
     LIST_FILE,
     N_POINTS,
@@ -51,7 +52,7 @@ INPUTS, OUTPUTS = "input folder", "out put ü"
 
 def _runs(in_process: bool) -> list:
     return [pytest.param(case, entry, id=f"{case.kind}:{case.name}@{entry}".encode("ascii", "replace").decode())
-            for case in CASES for entry in entry_points(case) if entry.startswith("stages.") != in_process]
+            for case in CASES for entry in entry_points(case) if entry.startswith(("stages.", CLI)) != in_process]
 
 
 def _root_skipped(case: Case) -> bool:
@@ -182,7 +183,8 @@ def test_reader(case: Case, entry: str, tmp_path: Path) -> None:
 
 
 def stage(module: str, *args: str | Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", f"stages.{module}", *map(str, args)], cwd=REPO,
+    command = ["refinenet.cli.main", "normals"] if module == "cli" else [f"stages.{module}"]
+    return subprocess.run([sys.executable, "-m", *command, *map(str, args)], cwd=REPO,
                           capture_output=True, text=True, encoding="utf-8", errors="replace", timeout=300)
 
 
@@ -239,6 +241,10 @@ def _stage_job(case: Case, entry: str, tmp: Path) -> tuple[Path, Path, str, list
     good_normals.write_text(good_normals_text())
     if case.kind == "params":
         return folder, path, "baselines", ["--params", path, "--method", "pca", "--cloud", good_cloud]
+    if entry == CLI and case.kind == "normals":  # Refine-Net on a good cloud, refining the case's normals
+        return folder, path, "cli", [good_cloud, "--initial", path, "--orient", "none"]
+    if entry == CLI:
+        return folder, path, "cli", [path, "--method", "pca", "--orient", "none"]
     if entry == "stages.baselines":
         return folder, path, "baselines", ["--method", "pca", "--cloud", path]
     if entry == "stages.mfps":
@@ -248,7 +254,8 @@ def _stage_job(case: Case, entry: str, tmp: Path) -> tuple[Path, Path, str, list
     return folder, path, "features", ["--cloud", path, "--initial", good_normals]
 
 
-OUT_NAMES = {"baselines": "result.normals", "mfps": "result.npy", "features": "result.npz", "clouds": "result.npz"}
+OUT_NAMES = {"baselines": "result.normals", "mfps": "result.npy", "features": "result.npz", "clouds": "result.npz",
+             "cli": "result.ply"}
 
 
 def check_output(module: str, out: Path) -> None:
@@ -256,6 +263,8 @@ def check_output(module: str, out: Path) -> None:
         assert_unit(np.loadtxt(out, ndmin=2), str(out))
     elif module == "mfps":
         assert_unit(np.load(out, allow_pickle=False), str(out))
+    elif module == "cli":
+        assert_cloud(read_cloud(out), str(out))
     else:
         with np.load(out, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files if key != "meta"}
@@ -287,7 +296,8 @@ def _start(case: Case, entry: str, tmp: Path, pool: ThreadPoolExecutor) -> Stage
     (out_dir / "keep.txt").write_text("an earlier output\n")
     out = out_dir / OUT_NAMES[module]
     inputs, outputs = _listing(folder), _listing(out_dir)
-    return StageRun(folder, path, module, out, inputs, outputs, pool.submit(stage, module, *args, "--out", out))
+    flag = "-o" if module == "cli" else "--out"
+    return StageRun(folder, path, module, out, inputs, outputs, pool.submit(stage, module, *args, flag, out))
 
 
 @pytest.fixture(scope="module")

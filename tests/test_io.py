@@ -111,7 +111,7 @@ def test_bad_binary_files(tmp_path):
         with pytest.raises(InputError, match=name):
             read_cloud(tmp_path / name)
     with pytest.raises(InputError, match="unsupported"):
-        read_cloud(tmp_path / "x.txt")
+        read_cloud(tmp_path / "x.las")
 
 
 def test_failed_write_leaves_nothing(tmp_path):

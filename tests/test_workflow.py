@@ -12,8 +12,8 @@ from refinenet.pipeline import workflow
 
 REPO = Path(__file__).resolve().parents[1]
 #: The floors of the library, bottom to top: a module may import only from its own floor and those below.
-FLOORS = ("config", "data", "geometry", "estimators", "features", "evaluation", "network", "pipeline")
-PACKAGES = {"data", "geometry", "estimators", "features", "evaluation", "network", "pipeline"}
+FLOORS = ("config", "data", "geometry", "estimators", "features", "evaluation", "network", "pipeline", "cli")
+PACKAGES = {"data", "geometry", "estimators", "features", "evaluation", "network", "pipeline", "cli"}
 
 
 def test_dvc_yaml_is_generated_from_the_step_declarations():

@@ -27,8 +27,10 @@ from refinenet.atomic import atomic_path
 from refinenet.errors import InputError, OutputError
 
 #: Point files a user or a data source gives, and (with .npz) the pipeline's own cloud records.
-POINT_FILE_SUFFIXES = (".xyz", ".ply", ".pcd", ".npy")
+POINT_FILE_SUFFIXES = (".xyz", ".txt", ".ply", ".pcd", ".npy")
 POINT_SUFFIXES = (*POINT_FILE_SUFFIXES, ".npz")
+#: Files `write_points` makes: a cloud with its normals, or (.normals) the normals alone.
+OUTPUT_SUFFIXES = (".ply", ".pcd", ".xyz", ".txt", ".npy", ".normals")
 #: Coordinates the estimators handle: MFPS and the feature filter square distances in float32, which overflows
 #: near 1e19 and underflows near 1e-19 (a unit sphere scaled by 1e-16 to 1e18 gives the same normals; by 1e30
 #: it gives NaN or a traceback). A cloud or mesh must lie within +-MAX_COORDINATE and span at least MIN_EXTENT
@@ -138,7 +140,7 @@ def read_cloud(path: str | Path, min_points: int = 1) -> Cloud:
     path = Path(path)
     suffix = check_file(path, POINT_SUFFIXES, "point file")
     meta: dict[str, Any] = {}
-    if suffix == ".xyz":
+    if suffix in (".xyz", ".txt"):
         points, normals = _split_columns(path, _read_table(path, "point"), "point file")
         sibling = path.with_suffix(".normals")
         if normals is None and sibling.exists():
@@ -365,8 +367,38 @@ def read_normals(path: str | Path, n_points: int) -> np.ndarray:
     return _check_normals(path, normals, n_points)
 
 
+def write_points(path: str | Path, points: np.ndarray, normals: np.ndarray) -> None:
+    """A cloud and its normals in the format of the path's suffix (OUTPUT_SUFFIXES): binary `.ply` or `.pcd`;
+    `.xyz` with a `.normals` file beside it (PCPNet); `.txt` with 6 columns; `.npy` as an N x 6 float64 array;
+    or `.normals`, the normals alone."""
+    suffix = check_output_type(path)
+    if suffix in (".ply", ".pcd"):
+        write_ply(path, points, normals)
+    elif suffix == ".xyz":
+        write_xyz_normals(path, points, normals)
+    elif suffix == ".normals":
+        write_normals(path, normals)
+    else:
+        table = np.concatenate([points, normals], axis=1)
+        with atomic_path(path) as tmp:
+            if suffix == ".npy":
+                with open(tmp, "wb") as fh:
+                    np.save(fh, table)
+            else:
+                np.savetxt(tmp, table, fmt="%.8f")
+
+
+def check_output_type(path: str | Path) -> str:
+    """The lower-case suffix of an output path `write_points` can write; otherwise an OutputError naming it."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise OutputError(path, f"unsupported output type '{suffix}' (use one of {', '.join(OUTPUT_SUFFIXES)})")
+    return suffix
+
+
 def write_ply(path: str | Path, points: np.ndarray, normals: np.ndarray | None = None) -> None:
-    """A binary `.ply` with optional per-point normals, readable by Open3D, MeshLab and CloudCompare."""
+    """A binary `.ply` (or `.pcd`, by the suffix) with optional per-point normals, readable by Open3D, MeshLab
+    and CloudCompare."""
     import open3d as o3d
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))

@@ -1,0 +1,110 @@
+"""Normals of a user's cloud, any size: the chain behind `refinenet normals`.
+
+Initial normals (MFPS, or any estimator's through `initial`), the feature cache and the shipped networks, run tile
+by tile (`geometry.tiles`) so that memory is bounded by the tile, not the cloud. Every whole-cloud quantity is
+computed once and handed to each tile: the length unit l_d (`geometry.scale`), MFPS's candidacy statistics, and
+each point's id for MFPS's random trials. With a margin that covers the farthest neighbourhood chain, a tile then
+gives its points the normals the whole cloud gives them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from tqdm import tqdm
+
+from refinenet.config import InferenceConfig, Params
+from refinenet.data.noise import bbox_diagonal
+from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
+from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
+from refinenet.features.cache import compute_features
+from refinenet.geometry.neighbors import build_tree
+from refinenet.geometry.scale import neighbour_distance, spacing_unit
+from refinenet.geometry.tiles import Tile, tiles
+from refinenet.network.inference import refine_normals
+from refinenet.network.release import Release
+
+METHODS = ("refinenet", "mfps", "pca", "jet")
+SCALES = ("spacing", "diagonal")
+#: Own points per tile. A tile of 500k points and its margin peak at about 2.5 GB (MFPS's neighbour lists and
+#: the height maps dominate); smaller clouds are one tile.
+TILE_POINTS = 500_000
+#: MFPS reaches this many k_bw-neighbourhood radii from a point: patches that contain it (1), their members (2),
+#: the members' bandwidth neighbourhoods (3) and the k0-patches that set their residuals (4, 5).
+MFPS_REACH = 5
+#: The feature cache and the point patches reach this many patch radii (height-map bins lie within 2 rho).
+FEATURE_REACH = 3
+#: Margins use this quantile of the neighbour distance, so that all but the sparsest points are covered.
+REACH_QUANTILE = 0.99
+
+
+def min_points(params: Params, method: str, refine_initial: bool) -> int:
+    """The fewest points a cloud needs for `method`: its largest neighbourhood."""
+    if method in ("pca", "jet"):
+        return neighbourhood_size(params.baselines, method, None)
+    network = max(params.features.hmp_k, params.patches.k)
+    if method == "refinenet" and refine_initial:
+        return network
+    mfps = max(params.mfps.scales[-1], params.mfps.k_bw)
+    return mfps if method == "mfps" else max(mfps, network)
+
+
+def estimate_normals(points: np.ndarray, release: Release, method: str = "refinenet",
+                     initial: np.ndarray | None = None, scale: str = "spacing", device: str = "auto",
+                     tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False) -> np.ndarray:
+    """Unit, unoriented normals (N, 3) of a cloud by `method`, with the release's settings (and networks).
+
+    `initial` (N, 3) replaces MFPS as the normals Refine-Net refines. `scale` picks l_d: the point spacing
+    calibrated on the training clouds, or the paper's bounding-box diagonal.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
+    if scale not in SCALES:
+        raise ValueError(f"unknown scale {scale!r} (one of {', '.join(SCALES)})")
+    params = release.params
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    tree = build_tree(points)
+    length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)
+    runs_mfps = method == "mfps" or (method == "refinenet" and initial is None)
+    margin = _margin(points, tree, params, method, runs_mfps, length) if len(points) > tile_points else 0.0
+    layout = list(tiles(points, tile_points, margin))
+    del tree
+    candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
+    inference = InferenceConfig(batch_size=params.inference.batch_size, device=device)
+    normals = np.empty_like(points)
+    inner = progress and len(layout) == 1
+    for tile in tqdm(layout, desc="tiles", unit="tile", disable=not progress or len(layout) == 1):
+        sub, rows = points[tile.ids], tile.own_rows
+        if method in ("pca", "jet"):
+            normals[tile.own] = baseline_normals(sub, method, params.baselines, None)[rows]
+            continue
+        start = initial[tile.ids] if initial is not None else mfps_normals(
+            sub, params.mfps, inner, workers, length=length, ids=tile.ids, candidacy=candidacy)
+        if method == "mfps":
+            normals[tile.own] = start[rows]
+            continue
+        features = compute_features(sub, start, params.features, inner, length=length, centres=rows,
+                                    workers=workers)
+        normals[tile.own] = refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
+                                           inference, progress=inner, centres=rows, length=length)
+    return normals
+
+
+def _margin(points: np.ndarray, tree, params: Params, method: str, runs_mfps: bool, length: float) -> float:
+    """How far beyond its own points a tile must reach for `method` to see whole neighbourhood chains."""
+    def radius(k: int) -> float:
+        return neighbour_distance(points, min(k, len(points) - 1), REACH_QUANTILE, tree)
+
+    if method in ("pca", "jet"):
+        return radius(neighbourhood_size(params.baselines, method, None))
+    margin = MFPS_REACH * radius(params.mfps.k_bw) if runs_mfps else 0.0
+    if method == "refinenet":
+        margin += params.features.r_f * length + FEATURE_REACH * radius(max(params.features.hmp_k, params.patches.k))
+    return margin
+
+
+def _candidacy(points: np.ndarray, layout: list[Tile], params: Params, progress: bool) -> Candidacy:
+    """MFPS's whole-cloud candidacy from the surface variation of every tile's own points."""
+    raw = np.empty(len(points))
+    for tile in tqdm(layout, desc="MFPS candidacy", unit="tile", disable=not progress):
+        raw[tile.own] = point_variation(points[tile.ids], params.mfps, tile.own_rows)
+    return cloud_candidacy(raw, params.mfps)

@@ -1,0 +1,158 @@
+"""The `refinenet` command: oriented Refine-Net normals for a user's own point cloud, with the shipped networks.
+
+Heavy modules are imported after the arguments are parsed, so that `--threads` reaches BLAS, OpenMP and numba
+before they start, and `refinenet --help` answers at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+ORIENTATIONS = ("mst", "viewpoint", "none")
+
+EXAMPLES = """examples:
+  refinenet normals scan.ply -o scan_normals.ply                 MFPS + Refine-Net, oriented by MST propagation
+  refinenet normals street.xyz -o street.npy --orient viewpoint --viewpoint 0 0 2
+  refinenet normals scan.ply -o scan.xyz --initial other_method.normals   refine another estimator's normals
+  refinenet normals scan.pcd -o scan_pca.ply --method pca --orient none
+  refinenet info                                                 provenance of the shipped networks
+
+Inputs: .xyz/.txt (3 or 6 columns), .ply, .pcd, .npy (N x 3 or N x 6). Outputs by extension: .ply/.pcd with
+normals, .xyz (+ .normals beside it), .txt or .npy (x y z nx ny nz), .normals (normals only).
+Errors are one line, 'error: FILE: PROBLEM', with exit status 2; nothing is written then."""
+
+
+def parser() -> argparse.ArgumentParser:
+    top = argparse.ArgumentParser(prog="refinenet", description=__doc__.split("\n")[0],
+                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
+    commands = top.add_subparsers(dest="command", required=True)
+    normals = commands.add_parser("normals", help="estimate the normals of a point cloud",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
+    normals.add_argument("input", help="the point cloud")
+    normals.add_argument("-o", "--output", required=True, help="the file to write (format from its extension)")
+    normals.add_argument("--method", default="refinenet", choices=("refinenet", "mfps", "pca", "jet"),
+                         help="refinenet (default: MFPS refined by the networks), or an estimator alone")
+    normals.add_argument("--initial", metavar="FILE",
+                         help="normals of any estimator for Refine-Net to refine instead of MFPS (.normals, .npy, "
+                              "or a point file with normals)")
+    normals.add_argument("--orient", default="mst", choices=ORIENTATIONS,
+                         help="mst: consistent along a minimum spanning tree, outwards on closed shapes (default); "
+                              "viewpoint: towards --viewpoint; none: unoriented, as the paper evaluates")
+    normals.add_argument("--viewpoint", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
+                         help="sensor position for --orient viewpoint (default: the origin)")
+    normals.add_argument("--scale", default="spacing", choices=("spacing", "diagonal"),
+                         help="length unit of the radii: from the point spacing (default, any size and units) or "
+                              "the bounding-box diagonal (the paper's, for whole objects)")
+    normals.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                         help="where the networks run (auto: CUDA when present)")
+    normals.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)),
+                         help="CPU threads (default: every core this process may use)")
+    normals.add_argument("--tile-points", type=int, default=None,
+                         help="points per spatial tile; larger clouds are processed tile by tile (default 500000)")
+    normals.add_argument("--release", metavar="FOLDER", help="a release exported by `snakemake release` "
+                                                             "(default: the networks shipped with the package)")
+    info = commands.add_parser("info", help="print the model card of the shipped networks")
+    info.add_argument("--release", metavar="FOLDER", help="another release folder")
+    return top
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    if getattr(args, "threads", 1) < 1:
+        return _fail(f"--threads: must be at least 1, got {args.threads}")
+    if args.command == "normals":
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+            os.environ[var] = str(args.threads)
+    from refinenet.errors import RefineNetError
+
+    try:
+        return normals(args) if args.command == "normals" else info(args)
+    except RefineNetError as err:
+        return _fail(str(err))
+
+
+def _fail(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return EXIT_BAD_INPUT
+
+
+def _release(args: argparse.Namespace, device: str = "cpu", with_networks: bool = True):
+    from refinenet.network.release import SHIPPED, load_release
+
+    return load_release(args.release or SHIPPED, device=device, with_networks=with_networks)
+
+
+def info(args: argparse.Namespace) -> int:
+    from refinenet.network.release import CARD_MD, SHIPPED
+
+    card = Path(args.release or SHIPPED) / CARD_MD
+    _release(args)  # the card is only shown for a release that loads
+    print(card.read_text(), end="")
+    return 0
+
+
+def normals(args: argparse.Namespace) -> int:
+    import numpy as np
+    import torch
+
+    from refinenet.cli.estimate import TILE_POINTS, estimate_normals, min_points
+    from refinenet.data.io import (
+        POINT_FILE_SUFFIXES,
+        check_file,
+        check_output_type,
+        read_cloud,
+        read_normals,
+        write_points,
+    )
+    from refinenet.errors import InputError, OutputError
+    from refinenet.geometry.orientation import orient_mst, orient_viewpoint
+    from refinenet.network.training import resolve_device
+
+    start = time.perf_counter()
+    torch.set_num_threads(args.threads)
+    check_file(args.input, POINT_FILE_SUFFIXES, "point file")
+    output = Path(args.output)
+    check_output_type(output)
+    if output.resolve() == Path(args.input).resolve():
+        raise OutputError(output, "is the input file; choose another output")
+    if args.initial and args.method != "refinenet":
+        raise InputError(args.initial, f"--initial is refined by Refine-Net; it cannot be used with --method "
+                                       f"{args.method}")
+    if args.tile_points is not None and args.tile_points < 1:
+        raise InputError("--tile-points", f"must be at least 1, got {args.tile_points}")
+    try:
+        device = str(resolve_device(args.device))
+    except ValueError as err:
+        raise InputError("--device", str(err)) from None
+    release = _release(args, device, with_networks=args.method == "refinenet")
+    cloud = read_cloud(args.input, min_points=min_points(release.params, args.method, args.initial is not None))
+    initial = None
+    if args.initial:
+        if Path(args.initial).suffix.lower() in (".normals", ".npy"):
+            initial = read_normals(args.initial, len(cloud))
+        else:
+            initial = read_cloud(args.initial).normals
+            if initial is None:
+                raise InputError(args.initial, "has no normals")
+            if len(initial) != len(cloud):
+                raise InputError(args.initial, f"{len(initial)} normals for {len(cloud)} points of {args.input}")
+    progress = sys.stderr.isatty()
+    result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
+                              args.tile_points or TILE_POINTS, args.threads, progress)
+    if args.orient == "mst":
+        result = orient_mst(cloud.points, result)
+    elif args.orient == "viewpoint":
+        result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
+    write_points(output, cloud.points, result)
+    print(f"{output}: {len(cloud):,} points, {args.method} normals ({args.orient} orientation) in "
+          f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
