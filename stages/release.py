@@ -40,7 +40,7 @@ def main(params, args):
     if len(args.networks) != model.n_clusters:
         raise InputError(args.clusters, f"{model.n_clusters} clusters, but {len(args.networks)} network folders")
     networks = load_networks(args.networks, network, device="cpu", fuse=False)
-    checks = [(cloud.points, features) for cloud, features in
+    checks = [(cloud.points, features, cloud.normals) for cloud, features in
               map(load_for_cloud, args.check_clouds, args.check_features)]
     clouds = [read_cloud(path) for path in args.clouds]
     card = {

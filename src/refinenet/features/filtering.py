@@ -7,7 +7,9 @@ frame (§4), the clustering (§5) and the network's normal branches read.
 The ball pairs (i, j) come from a dual-tree query between a spatially compact chunk of points (consecutive in
 the k-d tree's leaf order) and the whole cloud. The per-pair sums are sparse-times-dense products: column p of
 a (chunk x pairs) CSC matrix holds the spatial weight of pair p in row i_p, so the pairs need no sorting.
-Weights are evaluated in float32, the precision of the output.
+Weights are evaluated in float32, the precision of the output. Each point's sum runs over its neighbours in
+index order, whatever the k-d tree's shape, so a point gets bit-identical normals in any cloud that holds its
+ball in the same order (a tile of a large cloud, `geometry.tiles`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,7 @@ def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
     for sl in chunks(len(points), int(ball_sizes.max()), PAIRS_PER_CHUNK):
         rows = tree.indices[sl]  # leaf order: a compact region, which keeps the dual-tree query cheap
         pairs = build_tree(points[rows]).sparse_distance_matrix(tree, radius, output_type="ndarray")
+        pairs = pairs[np.lexsort((pairs["j"], pairs["i"]))]  # sums in neighbour order, not the tree's
         i, j = pairs["i"], pairs["j"]
         n_i, n_j = (np.stack([a[ids] for a in axes], axis=1) for ids in (rows[i], j))
         cos = np.einsum("pk,pk->p", n_i, n_j)

@@ -130,7 +130,7 @@ def _candidates(axes: list[np.ndarray], centres: np.ndarray, reach: np.ndarray,
     pairs = build_tree(centres).sparse_distance_matrix(tree, reach.max(), output_type="ndarray")
     i, j = pairs["i"], pairs["j"]
     keep = np.flatnonzero(pairs["v"] <= reach[i])
-    keep = keep[np.argsort(i[keep])]
+    keep = keep[np.lexsort((j[keep], i[keep]))]  # by centre, then neighbour index: sums in a fixed order
     i, j = i[keep], j[keep]
     count = np.bincount(i, minlength=len(centres))
     width = int(count.max())
