@@ -24,6 +24,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,23 @@ o3d.io.write_point_cloud(sys.argv[2], pcd)
 TARGETS = {100_000: (60, None), 1_000_000: (600, 4.0), 10_000_000: (None, 8.0)}
 
 
+def gemm_gflops(threads: int) -> float:
+    """The machine's speed now: the best of 3 float32 matrix products (102400 x 128 by 128 x 1024, the shape of
+    the network's largest layer) on `threads` threads. The CPU is shared, so timings are read against it."""
+    import torch
+
+    torch.set_num_threads(threads)
+    a, b = torch.randn(102_400, 128), torch.randn(128, 1024)
+    best = min(_seconds(lambda: a @ b) for _ in range(3))
+    return 2 * 102_400 * 128 * 1024 / best / 1e9
+
+
+def _seconds(fn) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
 def timed(command: list[str]) -> dict[str, float]:
     """Wall seconds, CPU seconds and peak resident memory (GB) of a whole process, from /usr/bin/time -v."""
     run = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True)
@@ -65,7 +83,7 @@ def case(n: int, threads: int, folder: Path) -> dict:
     write_ply(source, points)
     refinenet = str(Path(sys.executable).with_name("refinenet"))
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,
-              "machine": machine_info(),
+              "machine": machine_info(gemm_gflops_start=gemm_gflops(threads)),
               "ours": timed([refinenet, "normals", str(source), "-o", str(ours), "--threads", str(threads)]),
               "open3d": timed([sys.executable, "-c", OPEN3D, str(source), str(reference)])}
     for name, path in (("ours", ours), ("open3d", reference)):
@@ -74,7 +92,14 @@ def case(n: int, threads: int, folder: Path) -> dict:
         result[name].update(mean_deg=float(angles.mean()), rmse_deg=float(np.sqrt((angles ** 2).mean())),
                             outward=float((np.einsum("ij,ij->i", normals, truth) > 0).mean()))
     result["load_average_end"] = machine_info()["load_average_1min"]
+    result["gemm_gflops_end"] = gemm_gflops(threads)
     return result
+
+
+def _gemm(case: dict) -> str:
+    if "gemm_gflops_end" not in case:
+        return "not recorded"
+    return f"{case['machine']['gemm_gflops_start']:.0f}, {case['gemm_gflops_end']:.0f}"
 
 
 def report(cases: dict[str, dict]) -> str:
@@ -91,6 +116,7 @@ def report(cases: dict[str, dict]) -> str:
                     f"{r['wall_s']:.1f} | {r['peak_gb']:.2f} | {o['wall_s'] / r['wall_s']:.1f} | "
                     f"{o['mean_deg']:.2f} / {o['rmse_deg']:.2f} | {r['mean_deg']:.2f} / {r['rmse_deg']:.2f} | "
                     f"{o['outward']:.4f} | {c['machine']['load_average_1min']:.1f}, {c['load_average_end']:.1f} | "
+                    f"{_gemm(c)} | "
                     f"{'; '.join(verdicts)} |")
     machine = next(iter(cases.values()))["machine"]
     return "\n".join([
@@ -106,13 +132,15 @@ def report(cases: dict[str, dict]) -> str:
         f"{machine['python']}.",
         "",
         "| points | ours wall (s) | ours CPU (s) | ours peak (GB) | Open3D wall (s) | Open3D peak (GB) | wall ratio "
-        "| ours mean / RMSE (deg) | Open3D mean / RMSE (deg) | ours outward | load start, end | targets |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| ours mean / RMSE (deg) | Open3D mean / RMSE (deg) | ours outward | load start, end | GEMM GFLOP/s start, "
+        "end | targets |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         "Errors are unoriented angles to the true normals; *outward* is the fraction of our oriented normals on the "
         "outer side (Open3D's are unoriented). A load average above 2 at the start means another job shared the "
-        "cores.",
+        "cores. The GEMM column is the machine's speed at the time (`gemm_gflops`); the same machine has measured "
+        "from about 60 to about 200 GFLOP/s on different days, and the network's time follows it.",
         "",
     ])
 
