@@ -91,7 +91,7 @@ def info(args: argparse.Namespace) -> int:
     from refinenet.network.release import CARD_MD, SHIPPED
 
     card = Path(args.release or SHIPPED) / CARD_MD
-    _release(args)  # the card is only shown for a release that loads
+    _release(args, with_networks=False)  # the card is only shown for a release that loads
     print(card.read_text(), end="")
     return 0
 
