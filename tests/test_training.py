@@ -4,6 +4,7 @@ stopping, empty clusters and the settings check on resumption."""
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pandas as pd
@@ -90,6 +91,20 @@ def test_early_stopping(tmp_path, clouds, monkeypatch):
     # A finished run resumes to the same result without training.
     assert train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path, False) \
         == result
+
+
+def test_resumption_after_the_output_folder_was_cleared_keeps_the_best_weights(tmp_path, clouds, monkeypatch):
+    """Snakemake clears a killed job's output folder before rerunning it: a resumption whose later epochs never
+    beat the best one (here epoch 1) must still end with that epoch's weights in the folder."""
+    monkeypatch.setattr(training, "_validate", lambda *args, **kwargs: np.full(10, 3.0))
+    config = train_config(batch_size=128, max_epochs=50, patience=2, threads=1)
+    data = cluster_data(clouds, 0, config, patch_config())
+    out, checkpoints = tmp_path / "network", tmp_path / "checkpoints"
+    first = train_cluster(config, NORMALS_ONLY, data, out, False, checkpoint_dir=checkpoints)
+    weights = (out / BEST).read_bytes()
+    shutil.rmtree(out)
+    assert train_cluster(config, NORMALS_ONLY, data, out, False, checkpoint_dir=checkpoints) == first
+    assert first.best_epoch == 1 and (out / BEST).read_bytes() == weights
 
 
 def test_empty_cluster_writes_a_marker(tmp_path, clouds):

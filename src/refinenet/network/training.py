@@ -5,7 +5,9 @@ Output folder of a cluster (`cluster_dir`):
   the settings; written atomically after every epoch. Random state needs no saving: every epoch reseeds numpy
   (shuffling, ball patches) and torch (dropout) from (seed, epoch), so a resumed epoch draws what an
   uninterrupted one would.
-* `best.pt`: the weights of the epoch with the lowest validation RMSE (unoriented angle, degrees).
+* `best.pt`: the weights of the epoch with the lowest validation RMSE (unoriented angle, degrees). They are kept
+  beside the checkpoint and copied into the output folder when training ends, so a resumption after the folder
+  was cleared (Snakemake and DVC clear an unfinished step's outputs) still ends with the best epoch's weights.
 * `history.csv`: epoch, train_loss, val_mean_deg, val_rmse_deg, seconds (rewritten atomically after every
   epoch); the pipeline keeps it elsewhere (`history_path`), in a folder that DVC declares as plots.
 * `result.json`: how the training ended (`TrainResult`) and the sample counts, written last: its presence marks
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -138,8 +141,12 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
     fingerprint = _fingerprint(config, network, data)
     state: dict[str, Any] = {"epoch": 0, "best_epoch": 0, "best_val_rmse_deg": float("inf"), "history": []}
     saved = torch.load(checkpoint, map_location=device, weights_only=True) if checkpoint.exists() else None
+    best = checkpoint.with_name(BEST)
     if saved is not None and saved["fingerprint"] != fingerprint:
         tqdm.write(f"{checkpoint}: written with other settings or data; starting over")
+        saved = None
+    if saved is not None and saved["best_epoch"] > 0 and not best.exists():
+        tqdm.write(f"{checkpoint}: the best epoch's weights ({best.name}) are missing; starting over")
         saved = None
     if saved is not None:
         model.load_state_dict(saved["model"])
@@ -163,7 +170,7 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
                "val_rmse_deg": float(np.sqrt(np.mean(angles ** 2))), "seconds": time.perf_counter() - start}
         if row["val_rmse_deg"] < state["best_val_rmse_deg"]:
             state["best_epoch"], state["best_val_rmse_deg"] = epoch, row["val_rmse_deg"]
-            with atomic_path(out_dir / BEST) as tmp:
+            with atomic_path(best) as tmp:
                 torch.save({"model": model.state_dict(), "network": network_fingerprint(network), "epoch": epoch,
                             "val_rmse_deg": row["val_rmse_deg"]}, tmp)
         state["epoch"] = epoch
@@ -175,6 +182,9 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
         if progress:
             tqdm.write(f"cluster {data.cluster} epoch {epoch}: train loss {train_loss:.5f}, "
                        f"val mean {row['val_mean_deg']:.3f} deg, val RMSE {row['val_rmse_deg']:.3f} deg")
+    if best != out_dir / BEST and best.exists():
+        with atomic_path(out_dir / BEST) as tmp:
+            shutil.copyfile(best, tmp)
     return TrainResult(epochs=state["epoch"], best_epoch=state["best_epoch"],
                        best_val_rmse_deg=state["best_val_rmse_deg"],
                        stopped_early=state["epoch"] < config.max_epochs, empty=False)
