@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+import slurm_cluster
 from kill_anywhere import kill_anywhere, passed
 from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
@@ -143,6 +144,28 @@ def test_the_trained_networks_survive_the_run_and_are_in_the_dvc_cache(by_snakem
     assert "Nothing to be done" in snakemake(repo, "-n").stdout
 
 
+def test_a_run_pushed_to_a_shared_cache_and_pulled_into_a_fresh_clone_leaves_both_tools_nothing_to_do(
+        by_dvc, tmp_path):
+    """The team set-up of the README: a directory remote (a cluster's shared file system) added with one command
+    and committed; a finished run pushed; a fresh clone elsewhere pulls it, syncs Snakemake, and has nothing to
+    run in either tool, with the same reports and networks."""
+    assert dvc_changed_stages(by_dvc) == set()
+    sh(by_dvc, "dvc", "remote", "add", "--default", "shared", str(tmp_path / "cache"))
+    sh(by_dvc, "dvc", "push", "--quiet")
+    sh(by_dvc, "git", "add", "-A")
+    sh(by_dvc, "git", "-c", "user.name=test", "-c", "user.email=test@example.org", "commit", "-qm", "a finished run")
+    clone = tmp_path / "clone"
+    sh(tmp_path, "git", "clone", "-q", str(by_dvc), str(clone))
+    assert not (clone / "results").exists()
+    sh(clone, "dvc", "pull", "--quiet")
+    sh(clone, sys.executable, "-m", "refinenet.pipeline.bridge", "sync")
+    assert "Nothing to be done" in snakemake(clone, "-n").stdout
+    assert dvc_changed_stages(clone) == set()
+    assert trained_files(clone) == trained_files(by_dvc)
+    reports = [p.relative_to(by_dvc) for p in (by_dvc / "reports").rglob("*") if p.is_file()]
+    assert reports and all((clone / name).read_bytes() == (by_dvc / name).read_bytes() for name in reports)
+
+
 @pytest.mark.parametrize("tool", ["snakemake", "dvc"])
 def test_every_file_a_step_writes_is_a_declared_output(by_snakemake, by_dvc, tool):
     """Walk results/ and reports/: each file is a target of the step whose output folder holds it, or a training
@@ -206,3 +229,16 @@ def test_runs_killed_anywhere_end_with_bit_identical_reports(by_snakemake, tmp_p
     (tmp_path / "kill_anywhere.json").write_text(json.dumps(results, indent=2) + "\n")  # kept for the report
     for tool, result in results["tools"].items():
         assert passed(result, 10), (tool, result)
+
+
+@pytest.mark.slurm
+def test_a_real_slurm_cluster_runs_the_pipeline_with_the_slurm_profile_to_the_same_reports(by_snakemake, tmp_path):
+    """A single-node SLURM (slurmctld, slurmd, munge from the Debian archive) started on this machine; the smoke
+    pipeline through the executor plugin and workflow/profiles/slurm, one SLURM job per Snakemake job; every
+    report file equals the local run's. Needs root."""
+    reason = slurm_cluster.missing()
+    if reason:
+        pytest.skip(f"SLURM check: {reason}")
+    result = slurm_cluster.run_on_slurm(tmp_path, reference=by_snakemake)
+    (tmp_path / "slurm.json").write_text(json.dumps(result, indent=2) + "\n")
+    assert slurm_cluster.passed(result), result

@@ -19,6 +19,8 @@ rule inference:
     benchmark:
         "logs/inference/{cloud}.benchmark.tsv"
     threads: 1
+    resources:
+        gpu=wf.gpus(P.inference.device),
     conda:
         "../envs/refinenet.yaml"
     shell:

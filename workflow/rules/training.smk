@@ -21,6 +21,8 @@ rule training:
     benchmark:
         "logs/training/cluster_{cluster}.benchmark.tsv"
     threads: 1
+    resources:
+        gpu=wf.gpus(P.training.device),
     conda:
         "../envs/refinenet.yaml"
     shell:

@@ -111,7 +111,7 @@ def normals(args: argparse.Namespace) -> int:
     )
     from refinenet.errors import InputError, OutputError
     from refinenet.geometry.orientation import orient_mst, orient_viewpoint
-    from refinenet.network.training import resolve_device
+    from refinenet.network.devices import resolve_device
 
     start = time.perf_counter()
     torch.set_num_threads(args.threads)

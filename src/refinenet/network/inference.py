@@ -19,8 +19,9 @@ from refinenet.features.cache import Features
 from refinenet.geometry.frames import to_world
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.dataset import make_inputs, prepare
+from refinenet.network.devices import resolve_device
 from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm
-from refinenet.network.training import BEST, EMPTY, network_fingerprint, resolve_device
+from refinenet.network.training import BEST, EMPTY, network_fingerprint
 
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,

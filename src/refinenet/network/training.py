@@ -39,6 +39,7 @@ from refinenet.config import LOSSES as LOSS_NAMES
 from refinenet.config import PatchConfig, TrainConfig
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.dataset import ClusterData, PreparedCloud
+from refinenet.network.devices import resolve_device
 from refinenet.network.model import NetworkConfig, RefineNet
 
 LOSSES = dict(zip(LOSS_NAMES, (F.mse_loss, F.l1_loss), strict=True))
@@ -67,15 +68,6 @@ class TrainResult:
 def cluster_dir(model_dir: str | Path, cluster: int) -> Path:
     """The output folder of one cluster's network."""
     return Path(model_dir) / f"cluster_{cluster}"
-
-
-def resolve_device(device: str) -> torch.device:
-    """auto -> cuda when available, else cpu; an explicit cuda without a GPU is an error."""
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
-    if device == "cuda" and not torch.cuda.is_available():
-        raise ValueError("device 'cuda' was requested but torch sees no CUDA device")
-    return torch.device(device)
 
 
 def cluster_data(clouds: Sequence[PreparedCloud], cluster: int, config: TrainConfig,

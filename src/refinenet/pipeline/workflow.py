@@ -61,6 +61,13 @@ def check_keys(params: Params) -> list[str]:
     return list(first.values())
 
 
+def gpus(device: str) -> int:
+    """The `gpu` resource of a rule whose params name `device`: one GPU for cuda and auto, none for cpu. A cluster
+    executor turns it into a GPU request (SLURM: --gpus=1); a local run caps concurrent GPU jobs with
+    `--resources gpu=N`; rules without it never wait for a GPU."""
+    return 0 if device == "cpu" else 1
+
+
 def normals_path(method: str, cloud: str) -> str:
     """Estimated normals of the cloud with key `cloud`."""
     return REFINED.format(cloud=cloud) if method == REFINENET else NORMALS.format(method=method, cloud=cloud)
@@ -126,7 +133,7 @@ _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
              "data.noise")
-_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.training",
+_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.devices", "network.training",
             "features.patches", "evaluation.metrics")
 _TABLE = ("evaluation.table", "evaluation.metrics", "data.io", "data.shapes", "data.meshes")
 
