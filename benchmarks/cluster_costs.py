@@ -14,8 +14,9 @@
   both ways.
 
 Resources: memory 1.5x the measured peak (at least 1 GB), time limit 3x the measured or estimated job time (at
-least 10 minutes), a GPU for training and inference when the params' device is cuda or auto. A time limit hit
-by training costs nothing: the retry resumes from the last epoch's checkpoint.
+least 10 minutes). Every job is single-threaded (cpus_per_task 1, from the rules' threads): the parallelism is in
+running jobs side by side. GPUs come from the rules themselves (one for training and inference when their device
+is cuda or auto). A time limit hit by training costs nothing: the retry resumes from the last epoch's checkpoint.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from refinenet import config  # noqa: E402
-from refinenet.pipeline.workflow import clouds  # noqa: E402
+from refinenet.pipeline.workflow import clouds, gpus  # noqa: E402
 
 #: Rules whose jobs each read one cloud: cost proportional to its points.
 PER_CLOUD = ("clouds_train", "clouds_test", "mfps", "simple_mfps", "baselines", "features", "inference")
@@ -61,8 +62,9 @@ def job_costs(run: Path) -> pd.DataFrame:
 
 def job_counts(run: Path) -> dict[str, int]:
     """Jobs of every rule in a full run of the folder's profile (Snakemake's dry run, as if nothing existed)."""
+    env = {**os.environ, "PYTHONPATH": str(run / "src")}  # the folder's own code, not this checkout's
     out = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--forceall", "--quiet", "rules"], cwd=run,
-                         capture_output=True, text=True, check=True).stdout
+                         capture_output=True, text=True, check=True, env=env).stdout
     return {m[1]: int(m[2]) for m in re.finditer(r"^(\w+)\s+(\d+)$", out, flags=re.M) if m[1] not in ("all", "total")}
 
 
@@ -155,17 +157,11 @@ def _largest_share(run: Path) -> float:
 
 
 def resources(result: dict) -> dict[str, dict[str, int]]:
-    """SLURM resources per rule: memory and time with margins, a GPU where the params ask for one."""
-    gpu = result["device"] in ("cuda", "auto")
-    out = {}
-    for rule, cost in result["rules"].items():
-        peak = cost["peak_mb"] or MIN_MEM_MB
-        res = {"mem_mb": max(MIN_MEM_MB, math.ceil(peak * MEMORY_MARGIN / 256) * 256),
-               "runtime": max(MIN_MINUTES, math.ceil(cost["seconds_per_job"] * TIME_MARGIN / 60))}
-        if gpu and rule in GPU_RULES:
-            res["gpu"] = 1
-        out[rule] = res
-    return out
+    """SLURM memory and time per rule, with margins. GPUs are not set here: the rules ask for one from their
+    params' device (`workflow.gpus`), which a static profile could not follow."""
+    return {rule: {"mem_mb": max(MIN_MEM_MB, math.ceil((cost["peak_mb"] or MIN_MEM_MB) * MEMORY_MARGIN / 256) * 256),
+                   "runtime": max(MIN_MINUTES, math.ceil(cost["seconds_per_job"] * TIME_MARGIN / 60))}
+            for rule, cost in result["rules"].items()}
 
 
 def markdown(result: dict, res: dict) -> str:
@@ -182,8 +178,9 @@ def markdown(result: dict, res: dict) -> str:
     for rule, c in result["rules"].items():
         r = res[rule]
         core_hours = "-" if c["core_hours"] is None else c["core_hours"]
+        gpu = gpus(result["device"]) if rule in GPU_RULES else 0
         lines.append(f"| {rule} | {c['jobs']} | {c['seconds_per_job']:,} | {c['peak_mb'] or '-'} | {core_hours} | "
-                     f"{r['mem_mb']} | {r['runtime']} | {r.get('gpu', 0)} | {c['source']} |")
+                     f"{r['mem_mb']} | {r['runtime']} | {gpu} | {c['source']} |")
     t = result["rules"]["training"]
     cpu_hours = sum(c["core_hours"] or 0 for c in result["rules"].values())
     lines += ["", f"Training: {t['samples_per_epoch_all_clusters']:,} samples (training and validation points) per "
@@ -193,7 +190,8 @@ def markdown(result: dict, res: dict) -> str:
               f"{t['gpu_hours_at_max_epochs']} GPU-hours for all clusters at the epoch cap; the largest cluster "
               f"({t['largest_cluster_share']:.0%} of the points in the reference run) bounds one job at "
               f"{t['seconds_per_job'] / 3600:.1f} h.", "",
-              f"CPU rules in total: {cpu_hours:.1f} core-hours.", ""]
+              f"CPU rules in total: {cpu_hours:.1f} core-hours. Rules not listed (tables, metrics, release: "
+              "seconds each) run with the profile's default-resources.", ""]
     return "\n".join(lines)
 
 

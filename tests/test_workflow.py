@@ -36,6 +36,17 @@ def test_every_step_is_one_snakemake_rule_of_the_same_name():
         assert step.family in step.name.split("_") or step.name.startswith(f"{step.family}_"), step.name
 
 
+def test_the_slurm_profile_sizes_existing_rules_and_leaves_gpus_to_the_rules():
+    """A renamed step must not leave the cluster profile sizing a rule that no longer exists; GPU requests follow
+    the params' device in the rules (a static profile cannot)."""
+    profile = yaml.safe_load((REPO / "workflow/profiles/slurm/config.yaml").read_text())
+    assert profile["executor"] == "slurm"
+    sized = profile["set-resources"]
+    assert {"features", "training", "inference"} <= set(sized) <= set(workflow.STEPS)
+    assert all({"mem_mb", "runtime"} == set(res) for res in sized.values()), sized
+    assert (workflow.gpus("cpu"), workflow.gpus("auto"), workflow.gpus("cuda")) == (0, 1, 1)
+
+
 def test_steps_declare_every_library_module_their_script_imports():
     """A module missing from a step's code deps would let a code change go unnoticed by both tools."""
     for step in workflow.STEPS.values():
