@@ -1,7 +1,7 @@
 """A real single-node SLURM cluster on this machine, and the smoke pipeline run through Snakemake's SLURM executor
 plugin on it, compared with a local run: every report file must be bit-identical.
 
-    python tests/slurm_cluster.py --json benchmarks/results/slurm.json --log benchmarks/results/slurm.log
+    python tests/slurm_cluster.py [--json result.json] [--keep FOLDER]   # as root; --keep: keep the logs
 
 Needs root (it installs slurmctld, slurmd and munge from the Debian archive when they are missing and starts the
 daemons). No accounting database: the plugin polls `squeue`, which is reliable when finished jobs stay listed for
