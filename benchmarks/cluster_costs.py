@@ -137,7 +137,7 @@ def costs(sample: Path, references: list[Path]) -> dict:
     train = rules.setdefault("training", {"jobs": target.clustering.n_clusters, "peak_mb": None})
     train.update({"samples_per_epoch_all_clusters": samples, "max_epochs": epochs,
                   "cpu_samples_per_s": round(cpu_rate, 1),
-                  "cpu_core_hours_per_epoch": round(samples / cpu_rate / 3600 * (os.cpu_count() or 1), 1),
+                  "cpu_core_hours_per_epoch": round(samples / cpu_rate / 3600, 1),  # training jobs use 1 thread
                   "gpu_seconds_per_epoch": round(gpu_epoch_s, 1),
                   "gpu_hours_at_max_epochs": round(gpu_epoch_s * epochs / 3600, 2),
                   "largest_cluster_share": round(_largest_share(largest), 3),
@@ -184,9 +184,12 @@ def markdown(result: dict, res: dict) -> str:
     t = result["rules"]["training"]
     cpu_hours = sum(c["core_hours"] or 0 for c in result["rules"].values())
     lines += ["", f"Training: {t['samples_per_epoch_all_clusters']:,} samples (training and validation points) per "
-              f"epoch over all clusters. On this CPU {t['cpu_samples_per_s']} samples/s, i.e. "
+              f"epoch over all clusters. On one core of this CPU {t['cpu_samples_per_s']} samples/s with the reference "
+              f"run's network (the paper's is larger), i.e. at least "
               f"{t['cpu_core_hours_per_epoch']} core-hours per epoch, up to {t['max_epochs']} epochs (early stopping "
-              f"ends it sooner): not a CPU job. On one H100 {t['gpu_seconds_per_epoch']} s per epoch, "
+              "ends it sooner): not a CPU job. On one H100, at the release network's rate, "
+              f"{t['gpu_seconds_per_epoch']} s per epoch (a network with 300-point ball patches has 2.2x its "
+              "multiply-adds: benchmarks/results/inference.md), "
               f"{t['gpu_hours_at_max_epochs']} GPU-hours for all clusters at the epoch cap; the largest cluster "
               f"({t['largest_cluster_share']:.0%} of the points in the reference run) bounds one job at "
               f"{t['seconds_per_job'] / 3600:.1f} h.", "",
