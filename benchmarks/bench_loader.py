@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from cluster_costs import H100_TRAIN_SAMPLES_S
 from machine import machine_info
 
 from refinenet import config
@@ -26,8 +27,6 @@ from refinenet.features.cache import load_for_cloud
 from refinenet.network.dataset import Inputs, PreparedCloud, make_inputs
 from refinenet.network.model import RefineNet, architecture
 from refinenet.pipeline.workflow import CLOUD, FEATURES
-
-H100_TRAIN_SAMPLES_S = 65_000
 
 
 def main() -> int:

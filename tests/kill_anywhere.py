@@ -28,7 +28,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scratch import isolated, sh, smoke_copy  # noqa: E402
+from scratch import different_files, isolated, report_files, sh, smoke_copy  # noqa: E402
 
 POLL = 0.02
 COMMANDS = {"snakemake": [sys.executable, "-m", "snakemake", "-j2"], "dvc": ["dvc", "repro", "--quiet"]}
@@ -80,10 +80,6 @@ def kill_once(repo: Path, tool: str, delay: float, aims: dict[str, int], log: Pa
     return hit
 
 
-def report_files(repo: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(repo)): p.read_bytes() for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
-
-
 def passed(result: dict, kills: int) -> bool:
     """Every kill happened, one of them during a write and one during training, and the run ended as if none had."""
     return (result["kills"] == kills and result["during_write"] >= 1 and result["during_training"] >= 1
@@ -119,7 +115,7 @@ def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, refere
             sh(victim, *COMMANDS[tool], "--unlock")
         sh(victim, *COMMANDS[tool])
         got = report_files(victim)
-        different = sorted(name for name in expected.keys() | got.keys() if expected.get(name) != got.get(name))
+        different = different_files(expected, got)
         up_to_date = ("Nothing to be done" in sh(victim, sys.executable, "-m", "snakemake", "-n").stdout
                       and not json.loads(sh(victim, "dvc", "status", "--json").stdout or "{}"))
         results["tools"][tool] = {"kills": len(hits), "during_write": aims["write"],

@@ -47,3 +47,13 @@ def smoke_copy(tmp: Path) -> Path:
     set_param(tmp, "profile: cpu", "profile: smoke")
     sh(tmp, "git", "init", "-q")
     return tmp
+
+
+def report_files(repo: Path) -> dict[str, bytes]:
+    """Every file under the copy's reports/, by path, with its bytes."""
+    return {str(p.relative_to(repo)): p.read_bytes() for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
+
+
+def different_files(expected: dict[str, bytes], got: dict[str, bytes]) -> list[str]:
+    """Names present in only one of two `report_files` results, or with other bytes."""
+    return sorted(name for name in expected.keys() | got.keys() if expected.get(name) != got.get(name))

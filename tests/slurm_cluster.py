@@ -29,7 +29,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from scratch import isolated, sh, smoke_copy  # noqa: E402
+from scratch import different_files, isolated, report_files, sh, smoke_copy  # noqa: E402
 
 PACKAGES = ("slurmctld", "slurmd", "slurm-client", "munge")
 CONF = Path("/etc/slurm/slurm.conf")
@@ -152,10 +152,6 @@ def _wait(ready, seconds: float, failure: str) -> None:
         time.sleep(0.5)
 
 
-def report_files(repo: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(repo)): p.read_bytes() for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
-
-
 def run_on_slurm(workdir: Path, reference: Path | None = None) -> dict:
     """The smoke pipeline through `--executor slurm` in a fresh copy under `workdir`, compared with `reference`
     (a finished local smoke run; made here when not given)."""
@@ -174,7 +170,7 @@ def run_on_slurm(workdir: Path, reference: Path | None = None) -> dict:
         seconds = time.monotonic() - began
         submitted = sum("has been submitted with SLURM jobid" in line for line in output.splitlines())
     expected, got = report_files(reference), report_files(repo)
-    different = sorted(name for name in expected.keys() | got.keys() if expected.get(name) != got.get(name))
+    different = different_files(expected, got)
     return {"returncode": returncode, "seconds": round(seconds, 1), "slurm_jobs": submitted,
             "report_files": len(expected), "different_files": different,
             "log_tail": output[-4000:] if returncode else ""}
