@@ -1,7 +1,7 @@
 """A real single-node SLURM cluster on this machine, and the smoke pipeline run through Snakemake's SLURM executor
 plugin on it, compared with a local run: every report file must be bit-identical.
 
-    python tests/slurm_cluster.py [--json result.json] [--keep FOLDER]   # as root; --keep: keep the logs
+    python tests/slurm_cluster.py [--json result.json] [--log snakemake.log] [--keep FOLDER]   # as root
 
 Needs root (it installs slurmctld, slurmd and munge from the Debian archive when they are missing and starts the
 daemons). No accounting database: the plugin polls `squeue`, which is reliable when finished jobs stay listed for
@@ -152,9 +152,9 @@ def _wait(ready, seconds: float, failure: str) -> None:
         time.sleep(0.5)
 
 
-def run_on_slurm(workdir: Path, reference: Path | None = None) -> dict:
+def run_on_slurm(workdir: Path, reference: Path | None = None, log: Path | None = None) -> dict:
     """The smoke pipeline through `--executor slurm` in a fresh copy under `workdir`, compared with `reference`
-    (a finished local smoke run; made here when not given)."""
+    (a finished local smoke run; made here when not given); Snakemake's whole output goes to `log` if given."""
     if reference is None:
         reference = smoke_copy(workdir / "local")
         sh(reference, sys.executable, "-m", "snakemake", "-j2")
@@ -169,6 +169,8 @@ def run_on_slurm(workdir: Path, reference: Path | None = None) -> dict:
             returncode, output = f"timed out after {LIMIT_S} s", str(err.stdout or "") + str(err.stderr or "")
         seconds = time.monotonic() - began
         submitted = sum("has been submitted with SLURM jobid" in line for line in output.splitlines())
+    if log is not None:
+        log.write_text(output)
     expected, got = report_files(reference), report_files(repo)
     different = different_files(expected, got)
     return {"returncode": returncode, "seconds": round(seconds, 1), "slurm_jobs": submitted,
@@ -184,6 +186,7 @@ def main() -> int:
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # so that a stopped check still stops its daemons
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", help="write the result here")
+    parser.add_argument("--log", type=Path, help="write Snakemake's output here")
     parser.add_argument("--keep", type=Path, help="run in this folder and keep it (logs of the daemons and jobs)")
     args = parser.parse_args()
     reason = missing()
@@ -192,10 +195,10 @@ def main() -> int:
         return 0
     if args.keep:
         args.keep.mkdir(parents=True, exist_ok=True)
-        result = run_on_slurm(args.keep)
+        result = run_on_slurm(args.keep, log=args.log)
     else:
         with tempfile.TemporaryDirectory(prefix="slurm_cluster.") as tmp:
-            result = run_on_slurm(Path(tmp))
+            result = run_on_slurm(Path(tmp), log=args.log)
     text = json.dumps(result, indent=2)
     print(text)
     if args.json:
