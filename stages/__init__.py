@@ -6,10 +6,10 @@ BLAS, OpenMP and numba read their thread count once, when first imported, so the
 (default 1) is put into the environment here, before any stage module imports numpy.
 """
 
-import os
 import sys
+
+from refinenet.threads import limit_native_threads
 
 _THREADS = sys.argv[sys.argv.index("--threads") + 1] if "--threads" in sys.argv[:-1] else "1"
 if _THREADS.isdigit():
-    for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-        os.environ[_var] = _THREADS
+    limit_native_threads(_THREADS)

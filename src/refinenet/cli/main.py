@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+from refinenet.threads import limit_native_threads
+
 EXIT_BAD_INPUT = 2
 ORIENTATIONS = ("mst", "viewpoint", "none")
 
@@ -66,8 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "threads", 1) < 1:
         return _fail(f"--threads: must be at least 1, got {args.threads}")
     if args.command == "normals":
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
-            os.environ[var] = str(args.threads)
+        limit_native_threads(args.threads)
     from refinenet.errors import RefineNetError
 
     try:
