@@ -14,9 +14,10 @@
   both ways.
 
 Resources: memory 1.5x the measured peak (at least 1 GB), time limit 3x the measured or estimated job time (at
-least 10 minutes). Every job is single-threaded (cpus_per_task 1, from the rules' threads): the parallelism is in
-running jobs side by side. GPUs come from the rules themselves (one for training and inference when their device
-is cuda or auto). A time limit hit by training costs nothing: the retry resumes from the last epoch's checkpoint.
+least 10 minutes). cpus_per_task follows the rules' threads: 1 for every job but training (1 + its loader
+workers); the parallelism is in running jobs side by side. GPUs come from the rules themselves (one for training
+and inference when their device is cuda or auto). A time limit hit by training costs nothing: the retry resumes
+from the last epoch's checkpoint.
 """
 
 from __future__ import annotations

@@ -26,7 +26,9 @@ def main(params, args):
     if len(args.clouds) != len(args.features):
         raise InputError("--features", f"{len(args.features)} feature caches for {len(args.clouds)} clouds")
     network = architecture(params.network, params.features, params.patches)
-    config = replace(params.training, seed=derive_seed(params.seed, "train", args.cluster))
+    # The job's cores: the loader workers build batches, the rest train.
+    config = replace(params.training, seed=derive_seed(params.seed, "train", args.cluster),
+                     threads=max(1, args.threads - params.training.loader_workers))
     model, _ = load_cluster_model(args.clusters)
     clouds = []
     for cloud_path, feature_path in zip(args.clouds, args.features, strict=True):

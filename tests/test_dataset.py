@@ -106,18 +106,30 @@ def test_cap_is_drawn_once(clouds):
 def test_batches(clouds):
     data = cluster_samples(clouds, 1, seed=0)
     n = len(data.train)
-    sizes = [len(b) for b in data.batches(data.train, 64, FULL, np.random.default_rng(0), shuffle=True,
-                                          drop_last=True)]
+    sizes = [len(b) for b in data.batches(data.train, 64, FULL, (0,), shuffle=True, drop_last=True)]
     assert sizes == [64] * (n // 64)
-    sizes = [len(b) for b in data.batches(data.train, 64, FULL, np.random.default_rng(0), shuffle=True,
-                                          drop_last=False)]
+    sizes = [len(b) for b in data.batches(data.train, 64, FULL, (0,), shuffle=True, drop_last=False)]
     assert sum(sizes) == n and sizes[-1] == n - 64 * (n // 64)
     # One batch over both clouds = each cloud's inputs, grouped by cloud.
-    (whole,) = data.batches(data.val, len(data.val), FULL, np.random.default_rng(0), shuffle=False, drop_last=False)
+    (whole,) = data.batches(data.val, len(data.val), FULL, (0,), shuffle=False, drop_last=False)
     parts = [make_inputs(clouds[i], data.val.point[data.val.cloud == i], patch_config(), FULL,
                          np.random.default_rng(0)) for i in range(2)]
     for name in ("normals", "points", "heights", "target"):
         np.testing.assert_array_equal(getattr(whole, name), np.concatenate([getattr(p, name) for p in parts]))
+
+
+def test_loader_workers_build_the_same_batches(clouds):
+    """Ball patches draw random subsets: two worker processes must build exactly the batches this process builds,
+    in the same order, and another seed other subsets."""
+    data = cluster_samples(clouds, 1, seed=0, patch=patch_config(mode="ball", radius=0.1, max_points=32))
+    here = list(data.batches(data.train, 64, FULL, (3, 1), shuffle=True, drop_last=True))
+    there = list(data.batches(data.train, 64, FULL, (3, 1), shuffle=True, drop_last=True, workers=2))
+    other = list(data.batches(data.train, 64, FULL, (3, 2), shuffle=True, drop_last=True))
+    assert len(here) == len(there) == len(data.train) // 64 >= 2
+    for a, b in zip(here, there, strict=True):
+        for name in ("normals", "points", "heights", "target"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert not np.array_equal(here[0].points, other[0].points)
 
 
 def test_errors(clouds):

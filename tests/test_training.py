@@ -83,6 +83,24 @@ def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
     assert pd.read_csv(tmp_path / "resumed" / HISTORY)["epoch"].tolist() == [1, 2, 3]
 
 
+def test_loader_workers_train_the_same_network(tmp_path, clouds):
+    """Ball patches (random subsets per batch) built by two worker processes train bit-identical weights, and a
+    checkpoint resumes under another worker count."""
+    ball = patch_config(mode="ball", radius=0.1, max_points=32)
+    weights = {}
+    for workers in (0, 2):
+        config = train_config(batch_size=32, max_epochs=2, seed=5, max_train_points_per_cloud=96, threads=1,
+                              loader_workers=workers)
+        data = cluster_data(clouds, 0, config, ball)
+        train_cluster(config, preset("release"), data, tmp_path / str(workers), progress=False)
+        weights[workers] = torch.load(tmp_path / str(workers) / CHECKPOINT, weights_only=True)["model"]
+    for key, value in weights[0].items():
+        assert torch.equal(value, weights[2][key]), key
+    more = train_config(batch_size=32, max_epochs=3, seed=5, max_train_points_per_cloud=96, threads=1)
+    assert train_cluster(more, preset("release"), cluster_data(clouds, 0, more, ball), tmp_path / "2",
+                         progress=False).epochs == 3
+
+
 def test_early_stopping(tmp_path, clouds, monkeypatch):
     monkeypatch.setattr(training, "_validate", lambda *args, **kwargs: np.full(10, 3.0))
     config = train_config(batch_size=128, max_epochs=50, patience=2, threads=1)
@@ -131,7 +149,8 @@ def test_other_settings_start_over(tmp_path, clouds):
 
 
 @pytest.mark.parametrize("field, value", [("optimizer", "rmsprop"), ("loss", "cos"), ("device", "tpu"), ("lr", 0.0),
-                                          ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0)])
+                                          ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0),
+                                          ("loader_workers", -1)])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         train_config(**{field: value})

@@ -309,6 +309,9 @@ class TrainConfig:
     """Seeds the initial weights, the validation split, the point caps, shuffling, patches and dropout."""
     threads: int | None = None
     """torch CPU threads; None leaves torch's default."""
+    loader_workers: int = 0
+    """Processes that build batches (patches, frames, height maps) while the network trains; 0: the training
+    process itself. A GPU needs several to stay busy (benchmarks/results/loader.md); results do not depend on it."""
 
     def __post_init__(self) -> None:
         if self.optimizer not in OPTIMIZERS:
@@ -327,6 +330,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if self.threads is not None and self.threads < 1:
             raise ValueError(f"threads must be at least 1 or None, got {self.threads}")
+        if self.loader_workers < 0:
+            raise ValueError(f"loader_workers must be at least 0, got {self.loader_workers}")
         if not 0.0 < self.val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
         if self.max_train_points_per_cloud is not None and self.max_train_points_per_cloud < 1:

@@ -20,7 +20,7 @@ rule training:
         "logs/training/cluster_{cluster}.log",
     benchmark:
         "logs/training/cluster_{cluster}.benchmark.tsv"
-    threads: 1
+    threads: 1 + P.training.loader_workers  # one core trains, the others build batches
     resources:
         gpu=wf.gpus(P.training.device),
     conda:

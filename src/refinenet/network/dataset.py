@@ -11,17 +11,20 @@ and the seed, so every cluster's network sees the same partition of the points.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
+from torch.utils.data import DataLoader, Dataset
 
 from refinenet.config import PatchConfig
+from refinenet.data.noise import bbox_diagonal
 from refinenet.features.cache import Features
 from refinenet.features.patches import point_patches
+from refinenet.geometry.ball import BallGrid, ball_grid
 from refinenet.geometry.frames import target_sign, to_local
 from refinenet.geometry.neighbors import build_tree
 from refinenet.network.clustering import ClusterModel, cloud_clusters, local_normals
@@ -51,6 +54,7 @@ class PreparedCloud:
     length: float | None = None
     """l_d of ball patches (`geometry.scale`); None: the bounding-box diagonal of `points`."""
     tree: cKDTree = field(init=False, repr=False)
+    _ball: BallGrid | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.points = np.asarray(self.points, dtype=np.float64)
@@ -66,6 +70,13 @@ class PreparedCloud:
                 raise ValueError(f"ground-truth normals have shape {normals.shape}, expected ({m}, 3)")
             self.normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
         self.tree = build_tree(self.points)
+        self.length = bbox_diagonal(self.points) if self.length is None else self.length
+
+    def ball_grid(self, radius: float) -> BallGrid:
+        """The grid for ball patches of `radius` (absolute), built on first use and kept for every batch."""
+        if self._ball is None or self._ball.radius != radius:
+            self._ball = ball_grid(self.points, radius)
+        return self._ball
 
 
 def prepare(points: np.ndarray, features: Features, model: ClusterModel, normals: np.ndarray | None = None,
@@ -117,9 +128,10 @@ def make_inputs(cloud: PreparedCloud, index: np.ndarray, patch: PatchConfig, net
     nf = features.nf[index]
     points = None
     if network.uses_points:
+        grid = cloud.ball_grid(patch.radius * cloud.length) if patch.mode == "ball" else None
         points = point_patches(cloud.points, patch.mode, k=patch.k, radius=patch.radius,
                                max_points=patch.max_points, rng=rng, frames=frames, index=cloud.centres[index],
-                               tree=cloud.tree, length=cloud.length)
+                               tree=cloud.tree, length=cloud.length, grid=grid)
     heights = features.heights[index].astype(np.float32) if network.uses_hmps else None
     target = None
     if cloud.normals is not None:
@@ -178,22 +190,54 @@ class ClusterData:
             train.append(_cap(np.flatnonzero(mine & ~held_out), max_train_points_per_cloud, rng))
             val.append(_cap(np.flatnonzero(mine & held_out), max_val, rng))
         self.train, self.val = _samples(train), _samples(val)
+        if patch.mode == "ball":  # built here, before loader workers fork, so that they share the grids
+            for cloud in self.clouds:
+                cloud.ball_grid(patch.radius * cloud.length)
 
-    def batches(self, samples: Samples, batch_size: int, network: NetworkConfig, rng: np.random.Generator,
-                shuffle: bool, drop_last: bool) -> Iterator[Inputs]:
-        """Batches in shuffled (by `rng`) or stored order; `rng` also draws ball-mode patch subsets.
+    def batches(self, samples: Samples, batch_size: int, network: NetworkConfig, seed: Sequence[int],
+                shuffle: bool, drop_last: bool, workers: int = 0) -> Iterable[Inputs]:
+        """Batches in shuffled or stored order, built by `workers` processes (0: this one) while the caller trains.
 
-        Within a batch the samples are grouped by cloud (one patch query per cloud), which leaves the set, and
-        so the loss, unchanged.
+        The order is drawn from a generator seeded with `seed`, and batch b draws its ball-mode patch subsets from
+        one seeded with (*seed, b), so a batch is the same whichever process builds it: the worker count changes
+        the speed, never the result.
         """
-        order = rng.permutation(len(samples)) if shuffle else np.arange(len(samples))
+        order = np.random.default_rng(seed).permutation(len(samples)) if shuffle else np.arange(len(samples))
         stop = len(order) - len(order) % batch_size if drop_last else len(order)
-        for start in range(0, stop, batch_size):
-            chosen = order[start:start + batch_size]
-            clouds, points = samples.cloud[chosen], samples.point[chosen]
-            parts = [make_inputs(self.clouds[c], points[clouds == c], self.patch, network, rng)
-                     for c in np.unique(clouds)]
-            yield Inputs.concatenate(parts)
+        built = Batches(self, samples, order[:stop], batch_size, network, tuple(seed))
+        if workers == 0:
+            return (built[b] for b in range(len(built)))
+        # A generator of its own: the workers' seeds would otherwise be drawn from torch's global one, the one
+        # dropout draws from, and the trained weights would depend on the worker count.
+        return DataLoader(built, batch_size=None, num_workers=workers, collate_fn=_as_built,
+                          generator=torch.Generator().manual_seed(0))
+
+
+class Batches(Dataset):
+    """The batches of one pass over some samples, as a map-style dataset of whole batches, so that DataLoader
+    workers build them in parallel (on a GPU one process building patches feeds the network too slowly)."""
+
+    def __init__(self, data: ClusterData, samples: Samples, order: np.ndarray, batch_size: int,
+                 network: NetworkConfig, seed: tuple[int, ...]):
+        self.data, self.samples, self.order, self.batch_size = data, samples, order, batch_size
+        self.network, self.seed = network, seed
+
+    def __len__(self) -> int:
+        return -(-len(self.order) // self.batch_size)
+
+    def __getitem__(self, b: int) -> Inputs:
+        """Batch b, its samples grouped by cloud (one patch query per cloud; the set, and so the loss, is the same)."""
+        chosen = self.order[b * self.batch_size:(b + 1) * self.batch_size]
+        clouds, points = self.samples.cloud[chosen], self.samples.point[chosen]
+        rng = np.random.default_rng([*self.seed, b])
+        data = self.data
+        return Inputs.concatenate([make_inputs(data.clouds[c], points[clouds == c], data.patch, self.network, rng)
+                                   for c in np.unique(clouds)])
+
+
+def _as_built(batch: Inputs) -> Inputs:
+    """DataLoader's conversion step, left out: a batch arrives as `Batches` built it."""
+    return batch
 
 
 def _cap(index: np.ndarray, limit: int | None, rng: np.random.Generator) -> np.ndarray:

@@ -46,7 +46,7 @@ LOSSES = dict(zip(LOSS_NAMES, (F.mse_loss, F.l1_loss), strict=True))
 CHECKPOINT, BEST, HISTORY, EMPTY, RESULT = "checkpoint.pt", "best.pt", "history.csv", "empty.json", "result.json"
 HISTORY_COLUMNS = ("epoch", "train_loss", "val_mean_deg", "val_rmse_deg", "seconds")
 #: Settings that may change between a run and its resumption without invalidating the checkpoint.
-RESUMABLE_CHANGES = ("max_epochs", "patience", "device", "threads")
+RESUMABLE_CHANGES = ("max_epochs", "patience", "device", "threads", "loader_workers")
 
 
 @dataclass(frozen=True)
@@ -150,10 +150,9 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
     while state["epoch"] < config.max_epochs and state["epoch"] - state["best_epoch"] < config.patience:
         epoch = state["epoch"] + 1
         start = time.perf_counter()
-        seeds = np.random.SeedSequence([config.seed, epoch])
-        rng = np.random.default_rng(seeds)
-        torch.manual_seed(int(seeds.generate_state(1)[0]))
-        batches = tqdm(data.batches(data.train, batch_size, network, rng, shuffle=True, drop_last=True),
+        torch.manual_seed(int(np.random.SeedSequence([config.seed, epoch]).generate_state(1)[0]))
+        batches = tqdm(data.batches(data.train, batch_size, network, (config.seed, epoch), shuffle=True,
+                                    drop_last=True, workers=config.loader_workers),
                        total=n_train // batch_size, desc=f"cluster {data.cluster} epoch {epoch}", leave=False,
                        disable=not progress)
         train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, device)
@@ -226,12 +225,12 @@ def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: An
 def _validate(model: RefineNet, data: ClusterData, network: NetworkConfig, config: TrainConfig,
               device: torch.device) -> np.ndarray:
     """Unoriented angles (degrees) between predictions and targets on the validation samples; the same ball
-    subsets every epoch (a fixed generator), so epochs are compared on the same inputs."""
+    subsets every epoch (the same seed), so epochs are compared on the same inputs."""
     model.eval()
-    rng = np.random.default_rng(config.seed)
     angles = []
     with torch.inference_mode():
-        for inputs in data.batches(data.val, config.batch_size, network, rng, shuffle=False, drop_last=False):
+        for inputs in data.batches(data.val, config.batch_size, network, (config.seed,), shuffle=False,
+                                   drop_last=False, workers=config.loader_workers):
             out = model(*inputs.tensors(device)).cpu().numpy()
             angles.append(unoriented_angles(out, inputs.target))
     return np.concatenate(angles)
