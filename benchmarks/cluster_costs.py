@@ -36,6 +36,8 @@ import pandas as pd
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+from pipeline_report import job_benchmarks  # noqa: E402
+
 from refinenet import config  # noqa: E402
 from refinenet.pipeline.workflow import clouds, gpus  # noqa: E402
 
@@ -50,15 +52,8 @@ MEMORY_MARGIN, TIME_MARGIN, MIN_MEM_MB, MIN_MINUTES = 1.5, 3.0, 1000, 10
 
 def job_costs(run: Path) -> pd.DataFrame:
     """Per rule: jobs measured, their longest seconds and their largest peak memory (MB)."""
-    rows = []
-    for path in sorted((run / "logs").rglob("*.benchmark.tsv")):
-        rule = path.relative_to(run / "logs").parts[0].removesuffix(".benchmark.tsv")
-        if rule == "clouds":  # clouds_train and clouds_test share a log folder: tell them apart by the split
-            rule = f"clouds_{path.relative_to(run / 'logs').parts[1]}"
-        bench = pd.read_csv(path, sep="\t")
-        rows.append({"rule": rule, "seconds": float(bench["s"].iloc[0]), "rss_mb": float(bench["max_rss"].iloc[0])})
-    return pd.DataFrame(rows).groupby("rule").agg(measured=("seconds", "size"), seconds=("seconds", "max"),
-                                                  rss_mb=("rss_mb", "max"))
+    return job_benchmarks(run).groupby("rule").agg(measured=("seconds", "size"), seconds=("seconds", "max"),
+                                                   rss_mb=("rss_mb", "max"))
 
 
 def job_counts(run: Path) -> dict[str, int]:

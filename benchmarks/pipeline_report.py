@@ -17,15 +17,24 @@ from pathlib import Path
 import pandas as pd
 
 
-def rule_summary(run_dir: Path) -> pd.DataFrame:
+def job_benchmarks(run_dir: Path) -> pd.DataFrame:
+    """One row per job of a run: its step (clouds_train and clouds_test share a log folder and are told apart by
+    the split), seconds and peak memory (MB), from the benchmark files every rule writes."""
     rows = []
     for path in sorted((run_dir / "logs").rglob("*.benchmark.tsv")):
-        rule = path.relative_to(run_dir / "logs").parts[0].removesuffix(".benchmark.tsv")
+        parts = path.relative_to(run_dir / "logs").parts
+        rule = parts[0].removesuffix(".benchmark.tsv")
+        if rule == "clouds":
+            rule = f"clouds_{parts[1]}"
         bench = pd.read_csv(path, sep="\t")
-        rows.append({"rule": rule, "seconds": bench["s"].iloc[0], "max_rss_mb": bench["max_rss"].iloc[0]})
-    jobs = pd.DataFrame(rows)
-    return jobs.groupby("rule", sort=False).agg(jobs=("seconds", "size"), job_seconds=("seconds", "sum"),
-                                                longest_job_s=("seconds", "max"), peak_rss_mb=("max_rss_mb", "max"))
+        rows.append({"rule": rule, "seconds": float(bench["s"].iloc[0]), "rss_mb": float(bench["max_rss"].iloc[0])})
+    return pd.DataFrame(rows)
+
+
+def rule_summary(run_dir: Path) -> pd.DataFrame:
+    return job_benchmarks(run_dir).groupby("rule", sort=False).agg(
+        jobs=("seconds", "size"), job_seconds=("seconds", "sum"), longest_job_s=("seconds", "max"),
+        peak_rss_mb=("rss_mb", "max"))
 
 
 def main() -> None:
