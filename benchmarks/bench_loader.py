@@ -101,8 +101,7 @@ def main() -> int:
         lines += [f"The ball subsets of a batch (`geometry.ball`, hashed grid) take {ball_ms:.1f} ms against "
                   f"{reference_ms:.1f} ms for the dual k-d tree query they replaced (kept here as the reference): "
                   f"{reference_ms / ball_ms:.1f}x.", ""]
-    lines += [
-              f"On this CPU the loader in the training process alone builds {rates[0] / network_rate:.1f}x what the "
+    lines += [f"On this CPU the loader in the training process alone builds {rates[0] / network_rate:.1f}x what the "
               f"network consumes, so a CPU training is bound by the network. On a GPU the network takes "
               f"{H100_TRAIN_SAMPLES_S:,} samples/s: at {per_worker:,.0f} samples/s per worker, `loader_workers: "
               f"{needed}` (and as many cores) keep one H100 busy.", ""]

@@ -82,16 +82,14 @@ def _subsets(points, order, keys, dims, origin, cell, r2, sorted_centres, centre
     m = out.shape[1]
     for row in range(len(centres)):
         q = points[sorted_centres[row]]
-        c = np.empty(3, dtype=np.int64)
-        for a in range(3):
-            c[a] = int((q[a] - origin[a]) / cell)
+        cx, cy, cz = int((q[0] - origin[0]) / cell), int((q[1] - origin[1]) / cell), int((q[2] - origin[2]) / cell)
         state = seed ^ (np.uint64(row) * np.uint64(0xD1B54A32D192ED03))
         count = 0
-        for i in range(max(c[0] - 1, 0), min(c[0] + 1, dims[0] - 1) + 1):
-            for j in range(max(c[1] - 1, 0), min(c[1] + 1, dims[1] - 1) + 1):
+        for i in range(max(cx - 1, 0), min(cx + 1, dims[0] - 1) + 1):
+            for j in range(max(cy - 1, 0), min(cy + 1, dims[1] - 1) + 1):
                 first = (i * dims[1] + j) * dims[2]
-                lo = np.searchsorted(keys, first + max(c[2] - 1, 0))
-                hi = np.searchsorted(keys, first + min(c[2] + 1, dims[2] - 1), side="right")
+                lo = np.searchsorted(keys, first + max(cz - 1, 0))
+                hi = np.searchsorted(keys, first + min(cz + 1, dims[2] - 1), side="right")
                 for p in range(lo, hi):
                     d0, d1, d2 = points[p, 0] - q[0], points[p, 1] - q[1], points[p, 2] - q[2]
                     if d0 * d0 + d1 * d1 + d2 * d2 > r2:
