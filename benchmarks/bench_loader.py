@@ -31,7 +31,7 @@ from refinenet.geometry.ball import random_ball_subsets
 from refinenet.network.dataset import PreparedCloud
 from refinenet.network.model import RefineNet, architecture
 from refinenet.network.training import cluster_data
-from refinenet.pipeline.workflow import CLOUD, FEATURES
+from refinenet.pipeline.workflow import CLOUD, FEATURES, FULL
 
 
 def main() -> int:
@@ -46,7 +46,7 @@ def main() -> int:
     torch.set_num_threads(1)  # a training job's one core
     params = config.load(args.run / "params.yaml")
     cloud, features = load_for_cloud(args.run / CLOUD.format(cloud=args.cloud),
-                                     args.run / FEATURES.format(cloud=args.cloud))
+                                     args.run / FEATURES.format(variant=FULL, cloud=args.cloud))
     prepared = PreparedCloud(cloud.points, features, np.zeros(len(cloud), dtype=int), cloud.normals)
     data = cluster_data([prepared], 0, params.training, params.patches)
     network = architecture(params.network, params.features, params.patches)

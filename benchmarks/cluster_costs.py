@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 from pipeline_report import job_benchmarks  # noqa: E402
 
 from refinenet import config  # noqa: E402
-from refinenet.pipeline.workflow import clouds, gpus  # noqa: E402
+from refinenet.pipeline.workflow import FULL, HISTORY_DIR, MODEL_DIR, Pipeline, clouds, gpus  # noqa: E402
 
 #: Rules whose jobs each read one cloud: cost proportional to its points.
 PER_CLOUD = ("clouds_train", "clouds_test", "mfps", "simple_mfps", "baselines", "features", "inference")
@@ -76,9 +76,9 @@ def training_samples(params: config.Params) -> int:
 def cpu_training_rate(run: Path) -> float:
     """Samples per second of training on this machine's CPU: (train + validation points) x epochs / seconds."""
     samples = seconds = 0.0
-    for result in (run / "results/models/refinenet").glob("cluster_*/result.json"):
+    for result in (run / MODEL_DIR.format(variant=FULL)).glob("cluster_*/result.json"):
         info = json.loads(result.read_text())
-        history = pd.read_csv(run / f"results/history/refinenet/{result.parent.name}.csv")
+        history = pd.read_csv(run / HISTORY_DIR.format(variant=FULL) / f"{result.parent.name}.csv")
         samples += (info["train_points"] + info["val_points"]) * len(history)
         seconds += history["seconds"].sum()
     return samples / seconds
@@ -147,7 +147,7 @@ def costs(sample: Path, references: list[Path]) -> dict:
 
 
 def _largest_share(run: Path) -> float:
-    points = [json.loads(p.read_text())["train_points"] for p in (run / "results/models/refinenet").glob(
+    points = [json.loads(p.read_text())["train_points"] for p in (run / MODEL_DIR.format(variant=FULL)).glob(
         "cluster_*/result.json")]
     return max(points) / sum(points)
 
@@ -194,6 +194,21 @@ def markdown(result: dict, res: dict) -> str:
     return "\n".join(lines)
 
 
+def every_variant(res: dict[str, dict[str, int]], pipeline: Pipeline) -> dict[str, dict[str, int]]:
+    """The resources of full's steps given to every variant's instance of them, a training job's time scaled by
+    the share of the points its cluster holds (Kc_full / Kc_variant: fewer clusters, larger ones)."""
+    out = dict(res)
+    full_kc = pipeline.full.clustering.n_clusters
+    for step in pipeline.steps.values():
+        if step.name in out or step.family not in res:
+            continue
+        out[step.name] = dict(res[step.family])
+        if step.family == "training":
+            kc = pipeline.params[step.variant].clustering.n_clusters
+            out[step.name]["runtime"] = math.ceil(res["training"]["runtime"] * max(1.0, full_kc / kc))
+    return out
+
+
 def write_profile(path: Path, res: dict[str, dict[str, int]]) -> None:
     """Replace the set-resources block of the SLURM profile; its leading comment lines are kept."""
     text = path.read_text()
@@ -218,7 +233,8 @@ def main() -> int:
     args.out.with_suffix(".md").write_text(text)
     print(text)
     if args.write_profile:
-        write_profile(args.write_profile, res)
+        target = Pipeline(config.read_raw(args.sample / "params.yaml"))
+        write_profile(args.write_profile, every_variant(res, target))
     return 0
 
 

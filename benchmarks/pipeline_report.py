@@ -16,16 +16,22 @@ from pathlib import Path
 
 import pandas as pd
 
+from refinenet.pipeline.workflow import FULL, VARIANT_STEPS
+
 
 def job_benchmarks(run_dir: Path) -> pd.DataFrame:
     """One row per job of a run: its step (clouds_train and clouds_test share a log folder and are told apart by
-    the split), seconds and peak memory (MB), from the benchmark files every rule writes."""
+    the split; the per-variant steps by the variant folder), seconds and peak memory (MB), from the benchmark files
+    every rule writes."""
     rows = []
     for path in sorted((run_dir / "logs").rglob("*.benchmark.tsv")):
         parts = path.relative_to(run_dir / "logs").parts
         rule = parts[0].removesuffix(".benchmark.tsv")
         if rule == "clouds":
             rule = f"clouds_{parts[1]}"
+        elif rule in VARIANT_STEPS:
+            variant = parts[1].removesuffix(".benchmark.tsv")
+            rule = rule if variant == FULL else f"{rule}_{variant}"
         bench = pd.read_csv(path, sep="\t")
         rows.append({"rule": rule, "seconds": float(bench["s"].iloc[0]), "rss_mb": float(bench["max_rss"].iloc[0])})
     return pd.DataFrame(rows)

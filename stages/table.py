@@ -1,11 +1,14 @@
 """Evaluate the normals of every method of one table against ground truth; write the table (CSV, LaTeX, per-cloud
-CSV) and its metrics record. The normals of each test cloud are found by the pipeline's file layout."""
+CSV), its metrics record and, for a sweep table, the plot of the Average mean error against the swept setting.
+The normals of each test cloud are found by the pipeline's file layout."""
 
+from refinenet import config
 from refinenet.data.clouds import cloud_key
 from refinenet.data.io import read_cloud
+from refinenet.evaluation.plots import sweep_plot
 from refinenet.evaluation.table import evaluate, write_table
 from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import TABLES, Table, caption, normals_path
+from refinenet.pipeline.workflow import TABLES, Pipeline, Table
 
 
 def arguments(parser):
@@ -14,12 +17,20 @@ def arguments(parser):
 
 
 def main(params, args):
-    table = TABLES[args.table]
+    pipe, table = Pipeline(config.read_raw(args.params), args.params), TABLES[args.table]
+    rows = pipe.rows(table)
+    methods = list(rows)
     keys = [cloud_key(path, read_cloud(path)) for path in args.clouds]
-    normals = {m: [normals_path(m, key) for key in keys] for m in table.methods}
-    per_cloud = evaluate(table.methods, args.clouds, normals, params.evaluation.protocol)
-    write_table(per_cloud, params.evaluation.protocol, table.metrics, caption(table.title, params, table.methods),
-                args.table, Table.files(args.table))
+    normals = {m: [pipe.normals_path(m, key) for key in keys] for m in methods}
+    per_cloud = evaluate(methods, args.clouds, normals, params.evaluation.protocol)
+    files = Table.files(args.table, table)
+    csv = write_table(per_cloud, params.evaluation.protocol, table.metrics, pipe.caption(table), args.table, files,
+                      rows)
+    if table.sweep:
+        key, symbol = table.sweep
+        sweep_plot([pipe.swept(m, key) for m in methods], list(csv["Average/mean"]), symbol,
+                   "Average mean error (degrees)", f"{args.table}: profile {params.profile}, data {params.data.source}",
+                   files["plot"])
 
 
 if __name__ == "__main__":

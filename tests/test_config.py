@@ -90,3 +90,38 @@ def test_values_the_schema_cannot_judge_name_their_block(key, value, message):
     with pytest.raises(ParamsError) as info:
         config.Params.from_resolved(resolve(with_value(key, value)))
     assert str(info.value) == f"params.yaml: {message}" or message in str(info.value)
+
+
+def test_a_variant_overrides_the_profile_and_only_its_own_keys():
+    smoke = with_value("profile", "smoke")
+    full, kc8 = config.resolve(smoke), config.resolve(smoke, variant="kc8")
+    assert (full["clustering"]["n_clusters"], kc8["clustering"]["n_clusters"]) == (2, 8)
+    assert kc8["training"] == full["training"]  # the smoke profile's training applies to the variant too
+    assert config.resolve(smoke, variant="l1")["training"]["loss"] == "l1"
+    assert "variants" not in full
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"data": {"n_points": 10}}, "params.yaml: variants.bad.data: a variant may override only seed, features,"),
+        ({"training": {"los": "l1"}}, "params.yaml: variants.bad.training.los: overrides a key that does not exist"),
+        ({"training": {"loss": "l3"}}, "params.yaml: variants.bad.training.loss: 'l3' is not one of ['mse', 'l1']"),
+    ],
+)
+def test_a_bad_variant_is_reported_by_its_key(overrides, message):
+    raw = copy.deepcopy(RAW)
+    raw["variants"]["bad"] = overrides
+    with pytest.raises(ParamsError) as err:
+        config.resolve(raw)
+    assert str(err.value).startswith(message), str(err.value)
+
+
+def test_a_variant_name_is_checked():
+    for name in ("full", "Kc-2"):
+        raw = copy.deepcopy(RAW)
+        raw["variants"][name] = {}
+        with pytest.raises(ParamsError, match="variants"):
+            config.resolve(raw)
+    with pytest.raises(ParamsError, match="no variant 'nope'"):
+        config.resolve(RAW, variant="nope")

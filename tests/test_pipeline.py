@@ -17,30 +17,31 @@ from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.workflow import CHECKPOINT_DIR, HISTORY, NETWORK, STEPS
+from refinenet.pipeline.workflow import CHECKPOINT_DIR, FULL, HISTORY, MAIN, NETWORK, Pipeline
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
-#: Seconds the uninterrupted smoke run took, for spreading the kills of the kill-anywhere test over a run.
+#: Seconds the uninterrupted smoke run of the main job took, for spreading the kills of the kill-anywhere test.
 LENGTH: dict[str, float] = {}
 TABLE = "reports/table_synthetic.csv"
 
 
 @pytest.fixture(scope="module")
 def by_snakemake(tmp_path_factory):
+    """The main job, timed (the kill-anywhere test spreads its kills over it), then every other table."""
     repo = smoke_copy(tmp_path_factory.mktemp("snakemake"))
     began = time.monotonic()
-    snakemake(repo, "-j2")
+    snakemake(repo, "-j2", "main")
     LENGTH["snakemake"] = time.monotonic() - began
+    snakemake(repo, "-j2")
     return repo
 
 
 @pytest.fixture(scope="module")
 def by_dvc(tmp_path_factory):
-    """The same pipeline through DVC, one job at a time (REFINENET_CORES=1): a second fresh run, in another job
-    order than Snakemake's -j2 run."""
+    """The same pipeline through DVC: a second fresh run, stage by stage (another job order than Snakemake's)."""
     repo = smoke_copy(tmp_path_factory.mktemp("dvc"))
-    sh(repo, "dvc", "repro", env={"REFINENET_CORES": "1"})
+    sh(repo, "dvc", "repro", env={"REFINENET_CORES": "2"})
     return repo
 
 
@@ -66,7 +67,8 @@ def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
 def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by_snakemake):
     """Two fresh runs, -j1 through DVC and -j2 through Snakemake: every report file is bit-identical."""
     reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
-    assert len(reports) == 4 * len(TABLES) + 1  # csv, tex, per-cloud csv, metrics record each; metrics.json
+    # csv, tex, per-cloud csv, metrics record each; the Kc sweep's plot; metrics.json
+    assert len(reports) == 4 * len(TABLES) + 2
     for name in reports:
         assert (by_dvc / name).read_bytes() == (by_snakemake / name).read_bytes(), name
     assert "Nothing to be done" in snakemake(by_dvc, "-n").stdout
@@ -75,26 +77,39 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     assert "Running stage" not in second
 
 
-TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
-SEEDED = {"clouds_train", "clouds_test", "mfps", "simple_mfps", "clustering", "training", "inference"}
+PIPELINE = Pipeline(config.read_raw(REPO / "params.yaml"))
+STEPS = set(PIPELINE.steps)
+MAIN_TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
+TABLES = {name for name in STEPS if name.startswith("table_")}
+#: Every table with a Refine-Net row: its caption names Refine-Net's settings, MFPS's (its initial normals) included.
+REFINENET_TABLES = TABLES - {"table_baselines"}
+#: The release bundles the run's whole resolved params (full's: not the variants).
+RELEASE = {"release"}
+SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
+
+
+def family(name: str) -> set[str]:
+    """Every variant's instance of a step."""
+    return {step.name for step in PIPELINE.family(name)}
 
 
 @pytest.mark.parametrize(
     ("old", "new", "steps"),
     [
-        ("  jet_k: 100", "  jet_k: 90", {"baselines"} | TABLES),
-        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps", "table_synthetic", "table_synthetic_pgp"}),
-        ("  protocol: synthetic", "  protocol: pcpnet", TABLES),
-        ("seed: 2022", "seed: 7", SEEDED),
-        ("data: {n_points: 4000, max_shapes: 1}", "data: {n_points: 3000, max_shapes: 1}",
-         {"clouds_train", "clouds_test"} | TABLES),
-        ("  hmp_k: 100", "  hmp_k: 90", {"features", "table_synthetic", "table_synthetic_pgp"}),
-        ("  n_clusters: 4", "  n_clusters: 3", {"clustering", "table_synthetic", "table_synthetic_pgp"}),
-        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", {"inference"}),
+        ("  jet_k: 100", "  jet_k: 90", {"baselines"} | MAIN_TABLES | RELEASE),
+        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE),
+        ("  protocol: synthetic", "  protocol: pcpnet", TABLES | RELEASE),
+        ("seed: 2022", "seed: 7", SEEDED | RELEASE),
+        ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",
+         {"clouds_train", "clouds_test"} | TABLES | RELEASE),
+        ("  hmp_k: 100", "  hmp_k: 90", {"features"} | REFINENET_TABLES | RELEASE),
+        ("  n_clusters: 4", "  n_clusters: 3", family("clustering") | REFINENET_TABLES | RELEASE),
+        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE),
+        ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}", {"training_l1", "inference_l1",
+                                                                                       "table_loss"}),
     ],
 )
 def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, new, steps):
-    steps = steps | {"release"}  # the release bundles the run's whole resolved params
     set_param(by_snakemake, old, new)
     try:
         rules = snakemake_changed_rules(by_snakemake)
@@ -121,11 +136,11 @@ def trained_files(repo: Path) -> dict[str, bytes]:
     params = config.load(repo / "params.yaml")
     files = {}
     for c in range(params.clustering.n_clusters):
-        network = repo / NETWORK.format(cluster=c)
+        network = repo / NETWORK.format(variant=FULL, cluster=c)
         assert (network / "result.json").is_file()
         assert (network / "best.pt").is_file() or (network / "empty.json").is_file()
-        assert (repo / HISTORY.format(cluster=c)).is_file()
-        for path in [*network.iterdir(), repo / HISTORY.format(cluster=c)]:
+        assert (repo / HISTORY.format(variant=FULL, cluster=c)).is_file()
+        for path in [*network.iterdir(), repo / HISTORY.format(variant=FULL, cluster=c)]:
             files[str(path.relative_to(repo))] = path.read_bytes()
     return files
 
@@ -171,16 +186,16 @@ def test_every_file_a_step_writes_is_a_declared_output(by_snakemake, by_dvc, too
     """Walk results/ and reports/: each file is a target of the step whose output folder holds it, or a training
     checkpoint (kept outside every output on purpose, so that a killed run resumes)."""
     repo = by_snakemake if tool == "snakemake" else by_dvc
-    params = config.load(repo / "params.yaml")
-    owners = {Path(out): step for step in STEPS.values() for out in (*step.outs, *step.plots, *step.metrics)}
+    steps = Pipeline(config.read_raw(repo / "params.yaml")).steps.values()
+    owners = {Path(out): step for step in steps for out in (*step.outs, *step.plots, *step.metrics)}
     for folder in ("results", "reports"):
         for path in (repo / folder).rglob("*"):
             relative = path.relative_to(repo)
-            if not path.is_file() or Path(CHECKPOINT_DIR) in relative.parents or path.name == ".gitignore":
+            if not path.is_file() or Path(CHECKPOINT_DIR).parent in relative.parents or path.name == ".gitignore":
                 continue
             step = next((s for out, s in owners.items() if out == relative or out in relative.parents), None)
             assert step is not None, f"{relative} lies in no step's outputs"
-            targets = [str(repo / t) for t in step.targets(params)]
+            targets = [str(repo / t) for t in step.targets()]
             assert produced(path, targets), f"{relative} is not a declared output of {step.name}"
 
 
@@ -191,24 +206,26 @@ def test_an_inference_only_change_reruns_inference_and_keeps_the_networks(by_sna
     stamp = refined.stat().st_mtime_ns
     set_param(by_snakemake, "  batch_size: 1024\n  device", "  batch_size: 300\n  device")
     try:
-        snakemake(by_snakemake, "-j2")
+        snakemake(by_snakemake, "-j2", "main")
         assert refined.stat().st_mtime_ns != stamp
         assert trained_files(by_snakemake) == networks
-        assert dvc_changed_stages(by_snakemake) == set()
+        assert dvc_changed_stages(by_snakemake) == family("inference") - {"inference"}  # the variants' remain
     finally:
         set_param(by_snakemake, "  batch_size: 300\n  device", "  batch_size: 1024\n  device")
-    snakemake(by_snakemake, "-j2")
+    snakemake(by_snakemake, "-j2", "main")
+    assert dvc_changed_stages(by_snakemake) == set()
 
 
 def test_dvc_reruns_only_inference_after_an_inference_only_change(by_dvc):
     set_param(by_dvc, "  batch_size: 1024\n  device", "  batch_size: 300\n  device")
     try:
-        out = sh(by_dvc, "dvc", "repro").stdout
+        out = sh(by_dvc, "dvc", "repro", *MAIN).stdout
         ran = {line.split("'")[1] for line in out.splitlines() if line.startswith("Running stage")}
-        assert "inference" in ran and not ran & {"training", "features", "clustering", "mfps"}, ran
+        assert "inference" in ran and not ran & (STEPS - {"inference", "release"} - TABLES), ran
     finally:
         set_param(by_dvc, "  batch_size: 300\n  device", "  batch_size: 1024\n  device")
-    sh(by_dvc, "dvc", "repro")
+    sh(by_dvc, "dvc", "repro", *MAIN)
+    assert dvc_changed_stages(by_dvc) == set()
 
 
 def test_the_real_scan_setting_x8_runs_end_to_end(tmp_path_factory):
@@ -222,8 +239,9 @@ def test_the_real_scan_setting_x8_runs_end_to_end(tmp_path_factory):
 
 
 def test_runs_killed_anywhere_end_with_bit_identical_reports(by_snakemake, tmp_path):
-    """10 SIGKILLs at seeded moments through each tool (one during a write, one during training), each followed
-    by a restart: every report file equals the uninterrupted run's, and both tools have nothing left to do."""
+    """10 SIGKILLs at seeded moments through each tool's main job (one during a write, one during training), each
+    followed by a restart: every report file of the main job equals the uninterrupted run's, and both tools have
+    nothing left to do for it."""
     results = kill_anywhere(["snakemake", "dvc"], kills=10, seed=2022, workdir=tmp_path, reference=by_snakemake,
                             length=LENGTH["snakemake"])
     (tmp_path / "kill_anywhere.json").write_text(json.dumps(results, indent=2) + "\n")  # kept for the report

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from refinenet.evaluation.metrics import ErrorStats
-from refinenet.evaluation.table import aggregate, stats_row, to_csv_frame, to_latex
+from refinenet.evaluation.table import aggregate, metrics_record, stats_row, to_csv_frame, to_latex
 
 
 @pytest.fixture
@@ -53,3 +53,13 @@ def test_csv_and_latex(per_cloud, tmp_path):
                          cwd=tmp_path, capture_output=True, text=True)
     assert run.returncode == 0, run.stdout[-2000:]
     assert (tmp_path / "doc.pdf").stat().st_size > 1000
+
+
+def test_the_metrics_record_holds_the_average_per_method(per_cloud):
+    """What `dvc metrics show` prints stays small: the Average columns only (jet: categories at 1.75, 6 and 4 deg
+    pooled means -> their mean)."""
+    csv = to_csv_frame(aggregate(per_cloud, "synthetic", ["mean", "rmse"]))
+    record = metrics_record(csv)
+    assert set(record) == {"PCA", "Jet"} and set(record["Jet"]) == {"mean", "rmse"}
+    assert record["Jet"]["mean"] == pytest.approx(round(csv.loc["Jet", "Average/mean"], 4))
+    assert record["PCA"]["mean"] == pytest.approx(2 * record["Jet"]["mean"], abs=1e-3)

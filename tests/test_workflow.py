@@ -6,11 +6,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 import yaml
 
+from refinenet.errors import ParamsError
 from refinenet.pipeline import workflow
 
 REPO = Path(__file__).resolve().parents[1]
+PIPELINE = workflow.Pipeline(yaml.safe_load((REPO / "params.yaml").read_text()))
+STEPS = PIPELINE.steps
 #: The floors of the library, bottom to top: a module may import only from its own floor and those below.
 FLOORS = ("config", "data", "geometry", "estimators", "features", "evaluation", "network", "pipeline", "cli")
 PACKAGES = {"data", "geometry", "estimators", "features", "evaluation", "network", "pipeline", "cli"}
@@ -23,16 +27,16 @@ def test_dvc_yaml_is_generated_from_the_step_declarations():
 
 def test_dvc_stages_list_profile_overrides_of_their_keys():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    keys = workflow.tracked_keys(raw, workflow.STEPS["clouds_test"])
+    keys = workflow.tracked_keys(raw, STEPS["clouds_test"])
     assert {"profile", "data", "profiles.smoke.data", "profiles.cpu.data"} <= set(keys)
-    assert "profiles.smoke.data" not in workflow.tracked_keys(raw, workflow.STEPS["baselines"])
+    assert "profiles.smoke.data" not in workflow.tracked_keys(raw, STEPS["baselines"])
 
 
 def test_every_step_is_one_snakemake_rule_of_the_same_name():
     listed = subprocess.run([sys.executable, "-m", "snakemake", "--list-rules"], cwd=REPO,
                             capture_output=True, text=True, check=True).stdout.split()
-    assert set(listed) == {*workflow.STEPS, "all"}
-    for step in workflow.STEPS.values():
+    assert set(listed) == {*STEPS, "all", "main"}
+    for step in STEPS.values():
         assert step.family in step.name.split("_") or step.name.startswith(f"{step.family}_"), step.name
 
 
@@ -42,14 +46,14 @@ def test_the_slurm_profile_sizes_existing_rules_and_leaves_gpus_to_the_rules():
     profile = yaml.safe_load((REPO / "workflow/profiles/slurm/config.yaml").read_text())
     assert profile["executor"] == "slurm"
     sized = profile["set-resources"]
-    assert {"features", "training", "inference"} <= set(sized) <= set(workflow.STEPS)
+    assert {"features", "training", "inference"} <= set(sized) <= set(STEPS)
     assert all({"mem_mb", "runtime"} == set(res) for res in sized.values()), sized
     assert (workflow.gpus("cpu"), workflow.gpus("auto"), workflow.gpus("cuda")) == (0, 1, 1)
 
 
 def test_steps_declare_every_library_module_their_script_imports():
     """A module missing from a step's code deps would let a code change go unnoticed by both tools."""
-    for step in workflow.STEPS.values():
+    for step in {step.family: step for step in STEPS.values()}.values():
         module = f"stages.{step.family}"
         probe = (f"import importlib, json, sys; importlib.import_module('{module}'); "
                  "print(json.dumps(sorted(m for m in sys.modules if m.startswith('refinenet.'))))")
@@ -94,3 +98,34 @@ def test_each_job_command_names_its_own_method_and_table(tmp_path):
     assert {m for m, _ in methods} == {"pca", "jet", "mfps", "simple_mfps"}
     assert all(method == folder for method, folder in methods)
     assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(workflow.TABLES)
+
+
+def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
+    """l1 changes the loss: its own networks and normals, full's features and clusters. kc2 changes Kc: its own
+    clusters too. A variant of the features owns every step."""
+    assert PIPELINE.owners["l1"] == {"features": "full", "clustering": "full", "training": "l1", "inference": "l1"}
+    assert PIPELINE.owners["kc2"] == {"features": "full", "clustering": "kc2", "training": "kc2", "inference": "kc2"}
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    raw["variants"]["wide"] = {"features": {"r_f": 0.05}}
+    assert set(workflow.owners(raw, "wide").values()) == {"wide"}
+    assert "features_wide" in workflow.Pipeline(raw).steps
+    assert {"training_l1", "inference_l1"} <= set(STEPS) and not {"features_l1", "clustering_l1"} & set(STEPS)
+    assert STEPS["training_l1"].deps == ("results/clouds/train", "results/features/full/train",
+                                         "results/clusters/full")
+    assert "variants.l1.training" in workflow.tracked_keys(raw, STEPS["training_l1"])
+    assert not any(k.startswith("variants") for k in workflow.tracked_keys(raw, STEPS["training"]))
+
+
+def test_the_pipeline_is_the_same_whichever_profile_is_active():
+    """Which files a variant owns follows the keys it overrides, not their values: dvc.yaml needs no regeneration
+    when a user switches profile (in smoke kc2 equals full's Kc and is still a step of its own)."""
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    for profile in ("smoke", "paper"):
+        assert workflow.render_dvc_yaml({**raw, "profile": profile}) == workflow.render_dvc_yaml(raw)
+
+
+def test_a_table_needs_its_variants():
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    del raw["variants"]["l1"]
+    with pytest.raises(ParamsError, match="table_loss needs the variant 'l1'"):
+        workflow.Pipeline(raw)

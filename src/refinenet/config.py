@@ -28,6 +28,10 @@ SCHEMA = Path(__file__).with_name("params.schema.yaml")
 #: Mappings whose keys are data (categories, list names), replaced whole by an override.
 OPEN_MAPPINGS = frozenset({"test_lists", "test"})
 LOSSES = ("mse", "l1")
+#: The Refine-Net variant that params.yaml describes as written; every other variant overrides it.
+FULL = "full"
+#: The blocks a variant may override: those the per-variant steps (features, clustering, training, inference) read.
+VARIANT_BLOCKS = ("seed", "features", "clustering", "network", "patches", "training", "inference")
 
 @dataclass(frozen=True)
 class PCPNetLists:
@@ -418,9 +422,20 @@ def get(params: dict[str, Any], dotted: str) -> Any:
     return value
 
 
-def resolve(raw: dict[str, Any], source: str = "params.yaml", apply_profile: bool = True) -> dict[str, Any]:
+def resolve(raw: dict[str, Any], source: str = "params.yaml", apply_profile: bool = True,
+            variant: str = FULL) -> dict[str, Any]:
     """Validated parameters with the active profile's overrides applied (or, with `apply_profile` False, the
-    file's own values: what the tests and benchmarks use as the library's settings)."""
+    file's own values: what the tests and benchmarks use as the library's settings), then those of `variant`
+    (`variants` in params.yaml; `full` is the file as written)."""
+    resolved = resolve_variants(raw, source, apply_profile)
+    if variant not in resolved:
+        raise ParamsError("variants", f"no variant '{variant}' (variants: {sorted(resolved)})", source)
+    return resolved[variant]
+
+
+def resolve_variants(raw: dict[str, Any], source: str = "params.yaml",
+                     apply_profile: bool = True) -> dict[str, dict[str, Any]]:
+    """`resolve` of every variant, full first."""
     if not isinstance(raw, dict):
         raise ParamsError("(top level)", "expected a mapping of keys to values", source)
     profile = raw.get("profile")
@@ -441,7 +456,28 @@ def resolve(raw: dict[str, Any], source: str = "params.yaml", apply_profile: boo
             validate(merged, source)
         except ParamsError as err:
             raise ParamsError(f"profiles.{name}.{err.key}", err.problem, source) from None
-    return resolved
+    every = {FULL: resolved, **{name: _apply_variant(resolved, name, source) for name in resolved["variants"]}}
+    for params in every.values():  # a variant's settings are its whole params; the block has served
+        params.pop("variants")
+    return every
+
+
+def _apply_variant(resolved: dict[str, Any], name: str, source: str) -> dict[str, Any]:
+    """`resolved` with the overrides of variant `name`, checked: only the per-variant blocks, valid values."""
+    overrides = resolved["variants"][name]
+    for key in overrides:
+        if key not in VARIANT_BLOCKS:
+            raise ParamsError(f"variants.{name}.{key}", f"a variant may override only {', '.join(VARIANT_BLOCKS)}",
+                              source)
+    try:
+        merged = deep_merge(resolved, overrides, f"variants.{name}.")
+    except ParamsError as err:
+        raise ParamsError(err.key, err.problem, source) from None
+    try:
+        validate(merged, source)
+    except ParamsError as err:
+        raise ParamsError(f"variants.{name}.{err.key}", err.problem, source) from None
+    return merged
 
 
 @functools.cache
@@ -467,6 +503,6 @@ def read_raw(path: str | Path = "params.yaml") -> dict[str, Any]:
         raise ParamsError("(file)", f"cannot be read as YAML ({str(err).splitlines()[0]})", str(path)) from None
 
 
-def load(path: str | Path = "params.yaml", apply_profile: bool = True) -> Params:
-    """Read, resolve and validate a params file into `Params`."""
-    return Params.from_resolved(resolve(read_raw(path), str(path), apply_profile), str(path))
+def load(path: str | Path = "params.yaml", apply_profile: bool = True, variant: str = FULL) -> Params:
+    """Read, resolve and validate a params file into `Params` (of one Refine-Net variant)."""
+    return Params.from_resolved(resolve(read_raw(path), str(path), apply_profile, variant), str(path))

@@ -5,7 +5,7 @@ rule baselines:
     message:
         "{wildcards.method} normals of {wildcards.cloud}"
     input:
-        code=wf.STEPS["baselines"].code,
+        code=PIPE.steps["baselines"].code,
         cloud=wf.CLOUD,
     output:
         wf.NORMALS,

@@ -8,7 +8,7 @@ for split in ("train", "test"):
         message:
             "cloud {wildcards.cloud}"
         input:
-            code=wf.STEPS[f"clouds_{split}"].code,
+            code=PIPE.steps[f"clouds_{split}"].code,
         output:
             wf.CLOUD,
         wildcard_constraints:

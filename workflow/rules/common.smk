@@ -1,21 +1,21 @@
-# Shared set-up: the typed params, the run's clouds, wildcard constraints, and the DVC record hook.
+# Shared set-up: the pipeline of params.yaml (typed params of every Refine-Net variant, the steps, the clouds),
+# wildcard constraints, and the DVC record hook.
 
 import os
 import sys
 
-from refinenet import config as params_lib
 from refinenet.errors import RefineNetError
 from refinenet.pipeline import workflow as wf
 
 try:
-    P = params_lib.Params.from_resolved(params_lib.resolve(config))
-    CLOUDS = wf.clouds(P)
+    PIPE = wf.Pipeline(config)
+    P = PIPE.full
+    CLOUDS = PIPE.clouds
 except RefineNetError as err:
     sys.exit(f"error: {err}")
 
-TEST_CLOUDS = [wf.CLOUD.format(cloud=c.key) for c in CLOUDS if c.split == "test"]
-TRAIN_KEYS = [c.key for c in CLOUDS if c.split == "train"]
-CLUSTERS = range(P.clustering.n_clusters)
+TEST_CLOUDS = [wf.CLOUD.format(cloud=key) for key in PIPE.keys("test")]
+TRAIN_KEYS = PIPE.keys("train")
 
 
 wildcard_constraints:
@@ -25,7 +25,12 @@ wildcard_constraints:
 
 def tracked(step):
     """Rule params holding every params key the DVC stage lists, so both tools rerun on the same changes."""
-    return wf.tracked_params(config, wf.STEPS[step])
+    return wf.tracked_params(config, PIPE.steps[step])
+
+
+def files(variant, family, pattern, **values):
+    """A per-variant step's file pattern for the variant that owns the step's files (itself or full)."""
+    return wf.fill(pattern, variant=PIPE.owner(variant, family), **values)
 
 
 def record_in_dvc():

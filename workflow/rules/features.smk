@@ -1,24 +1,30 @@
 # Feature cache per cloud: multi-scale filtered normals, per-point frames, height maps (docs/algorithm.md §3, §4, §7).
+# One step per variant whose overrides change the features (full's serves the others). The shell command is
+# formatted when a job runs, after the loop has ended, so the loop variable reaches it as a param.
 
+for step in PIPE.family("features"):
 
-rule features:
-    message:
-        "features of {wildcards.cloud}"
-    input:
-        code=wf.STEPS["features"].code,
-        cloud=wf.CLOUD,
-        initial=wf.normals_path("mfps", "{cloud}"),
-    output:
-        wf.FEATURES,
-    params:
-        tracked=tracked("features"),
-    log:
-        "logs/features/{cloud}.log",
-    benchmark:
-        "logs/features/{cloud}.benchmark.tsv"
-    threads: 1
-    conda:
-        "../envs/refinenet.yaml"
-    shell:
-        "python -m stages.features --cloud {input.cloud} --initial {input.initial} --out {output}"
-        " --threads {threads} 2>&1 | tee {log}"
+    rule:
+        name:
+            step.name
+        message:
+            f"features ({step.variant}) of {{wildcards.cloud}}"
+        input:
+            code=step.code,
+            cloud=wf.CLOUD,
+            initial=PIPE.normals_path("mfps", "{cloud}"),
+        output:
+            wf.fill(wf.FEATURES, variant=step.variant),
+        params:
+            tracked=tracked(step.name),
+            variant=step.variant,
+        log:
+            f"logs/features/{step.variant}/{{cloud}}.log",
+        benchmark:
+            f"logs/features/{step.variant}/{{cloud}}.benchmark.tsv"
+        threads: 1
+        conda:
+            "../envs/refinenet.yaml"
+        shell:
+            "python -m stages.features --variant {params.variant} --cloud {input.cloud} --initial {input.initial}"
+            " --out {output} --threads {threads} 2>&1 | tee {log}"

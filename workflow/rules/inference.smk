@@ -1,28 +1,37 @@
-# Refine-Net normals of every test cloud, merged across clusters, in the PCPNet format (docs/algorithm.md §10).
+# Refine-Net normals of every test cloud, merged across clusters, in the PCPNet format (docs/algorithm.md §10);
+# one step per variant.
 
+for step in PIPE.family("inference"):
 
-rule inference:
-    message:
-        "Refine-Net normals of {wildcards.cloud}"
-    input:
-        code=wf.STEPS["inference"].code,
-        cloud=wf.CLOUD,
-        features=wf.FEATURES,
-        clusters=wf.CLUSTER_MODEL,
-        networks=[wf.NETWORK.format(cluster=c) for c in CLUSTERS],
-    output:
-        wf.REFINED,
-    params:
-        tracked=tracked("inference"),
-    log:
-        "logs/inference/{cloud}.log",
-    benchmark:
-        "logs/inference/{cloud}.benchmark.tsv"
-    threads: 1
-    resources:
-        gpu=wf.gpus(P.inference.device),
-    conda:
-        "../envs/refinenet.yaml"
-    shell:
-        "python -m stages.inference --cloud {input.cloud} --features {input.features} --clusters {input.clusters}"
-        " --networks {input.networks} --out {output} --threads {threads} 2>&1 | tee {log}"
+    rule:
+        name:
+            step.name
+        message:
+            f"Refine-Net ({step.variant}) normals of {{wildcards.cloud}}"
+        input:
+            code=step.code,
+            cloud=wf.CLOUD,
+            features=files(step.variant, "features", wf.FEATURES),
+            clusters=files(step.variant, "clustering", wf.CLUSTER_MODEL),
+            networks=[
+                files(step.variant, "training", wf.NETWORK, cluster=c)
+                for c in range(PIPE.params[step.variant].clustering.n_clusters)
+            ],
+        output:
+            wf.fill(wf.REFINED, variant=step.variant),
+        params:
+            tracked=tracked(step.name),
+            variant=step.variant,
+        log:
+            f"logs/inference/{step.variant}/{{cloud}}.log",
+        benchmark:
+            f"logs/inference/{step.variant}/{{cloud}}.benchmark.tsv"
+        threads: 1
+        resources:
+            gpu=wf.gpus(PIPE.params[step.variant].inference.device),
+        conda:
+            "../envs/refinenet.yaml"
+        shell:
+            "python -m stages.inference --variant {params.variant} --cloud {input.cloud} --features {input.features}"
+            " --clusters {input.clusters} --networks {input.networks} --out {output} --threads {threads}"
+            " 2>&1 | tee {log}"

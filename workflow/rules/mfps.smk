@@ -10,10 +10,10 @@ for method in ("mfps", "simple_mfps"):
         message:
             f"{method} normals of {{wildcards.cloud}}"
         input:
-            code=wf.STEPS[method].code,
+            code=PIPE.steps[method].code,
             cloud=wf.CLOUD,
         output:
-            wf.normals_path(method, "{cloud}"),
+            PIPE.normals_path(method, "{cloud}"),
         params:
             tracked=tracked(method),
             method=method,

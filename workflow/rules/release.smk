@@ -6,12 +6,12 @@ rule release:
     message:
         "export the trained networks as the release of profile {P.profile}"
     input:
-        code=wf.STEPS["release"].code,
+        code=PIPE.steps["release"].code,
         clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-        clusters=wf.CLUSTER_MODEL,
-        networks=[wf.NETWORK.format(cluster=c) for c in CLUSTERS],
+        clusters=wf.CLUSTER_MODEL.format(variant=wf.FULL),
+        networks=[wf.NETWORK.format(variant=wf.FULL, cluster=c) for c in range(P.clustering.n_clusters)],
         check_clouds=[wf.CLOUD.format(cloud=key) for key in wf.check_keys(P)],
-        check_features=[wf.FEATURES.format(cloud=key) for key in wf.check_keys(P)],
+        check_features=[wf.FEATURES.format(variant=wf.FULL, cloud=key) for key in wf.check_keys(P)],
     output:
         directory(wf.RELEASE),
     params:

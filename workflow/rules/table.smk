@@ -10,11 +10,11 @@ for name, table in wf.TABLES.items():
         message:
             name
         input:
-            code=wf.STEPS[name].code,
+            code=PIPE.steps[name].code,
             clouds=TEST_CLOUDS,
-            normals=[wf.normals_path(m, c.key) for m in table.methods for c in CLOUDS if c.split == "test"],
+            normals=[PIPE.normals_path(m, key) for m in table.methods for key in PIPE.keys("test")],
         output:
-            **wf.Table.files(name),
+            **wf.Table.files(name, table),
         params:
             tracked=tracked(name),
             table=name,

@@ -1,31 +1,36 @@
-# One network per cluster (docs/algorithm.md §9). The network folder and the training history are the outputs;
-# checkpoints live outside them, so a killed run resumes from its last finished epoch.
+# One network per cluster (docs/algorithm.md §9), one step per variant. The network folder and the training
+# history are the outputs; checkpoints live outside them, so a killed run resumes from its last finished epoch.
 
+for step in PIPE.family("training"):
 
-rule training:
-    message:
-        "train the network of cluster {wildcards.cluster}"
-    input:
-        code=wf.STEPS["training"].code,
-        clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-        features=[wf.FEATURES.format(cloud=key) for key in TRAIN_KEYS],
-        clusters=wf.CLUSTER_MODEL,
-    output:
-        network=directory(wf.NETWORK),
-        history=wf.HISTORY,
-    params:
-        tracked=tracked("training"),
-        checkpoints=wf.CHECKPOINT_DIR,
-    log:
-        "logs/training/cluster_{cluster}.log",
-    benchmark:
-        "logs/training/cluster_{cluster}.benchmark.tsv"
-    threads: 1 + P.training.loader_workers  # one core trains, the others build batches
-    resources:
-        gpu=wf.gpus(P.training.device),
-    conda:
-        "../envs/refinenet.yaml"
-    shell:
-        "python -m stages.training --cluster {wildcards.cluster} --clouds {input.clouds} --features {input.features}"
-        " --clusters {input.clusters} --out {output.network} --history {output.history}"
-        " --checkpoints {params.checkpoints} --threads {threads} 2>&1 | tee {log}"
+    rule:
+        name:
+            step.name
+        message:
+            f"train the network of cluster {{wildcards.cluster}} ({step.variant})"
+        input:
+            code=step.code,
+            clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+            features=[files(step.variant, "features", wf.FEATURES, cloud=key) for key in TRAIN_KEYS],
+            clusters=files(step.variant, "clustering", wf.CLUSTER_MODEL),
+        output:
+            network=directory(wf.fill(wf.NETWORK, variant=step.variant)),
+            history=wf.fill(wf.HISTORY, variant=step.variant),
+        params:
+            tracked=tracked(step.name),
+            variant=step.variant,
+            checkpoints=wf.CHECKPOINT_DIR.format(variant=step.variant),
+        log:
+            f"logs/training/{step.variant}/cluster_{{cluster}}.log",
+        benchmark:
+            f"logs/training/{step.variant}/cluster_{{cluster}}.benchmark.tsv"
+        threads: 1 + PIPE.params[step.variant].training.loader_workers  # one core trains, the others build batches
+        resources:
+            gpu=wf.gpus(PIPE.params[step.variant].training.device),
+        conda:
+            "../envs/refinenet.yaml"
+        shell:
+            "python -m stages.training --variant {params.variant} --cluster {wildcards.cluster}"
+            " --clouds {input.clouds} --features {input.features} --clusters {input.clusters}"
+            " --out {output.network} --history {output.history} --checkpoints {params.checkpoints}"
+            " --threads {threads} 2>&1 | tee {log}"

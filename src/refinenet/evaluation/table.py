@@ -47,27 +47,27 @@ def evaluate(methods: Sequence[str], clouds: Sequence[str | Path], normals: dict
 
 
 def write_table(per_cloud: pd.DataFrame, protocol: str, metrics: Sequence[str], caption: str, label: str,
-                paths: dict[str, str | Path]) -> None:
-    """The table's four files (`paths` keys csv, tex, per_cloud, metrics), each written atomically."""
+                paths: dict[str, str | Path], names: dict[str, str] | None = None) -> pd.DataFrame:
+    """The table's four files (`paths` keys csv, tex, per_cloud, metrics), each written atomically; `names`: row
+    names where they differ from `METHOD_NAMES`. Returns the table as written to the CSV."""
+    names = {**METHOD_NAMES, **(names or {})}
     table = aggregate(per_cloud, protocol, metrics)
-    csv = to_csv_frame(table)
+    csv = to_csv_frame(table, names)
     with atomic_path(paths["per_cloud"]) as tmp:
         per_cloud.to_csv(tmp, index=False, float_format="%.6g")
     with atomic_path(paths["csv"]) as tmp:
         csv.to_csv(tmp, float_format="%.4f")
-    write_text(paths["tex"], to_latex(table, caption, label))
-    write_text(paths["metrics"], json.dumps(csv.to_dict(orient="index"), indent=2) + "\n")
+    write_text(paths["tex"], to_latex(table, caption, label, names))
+    write_text(paths["metrics"], json.dumps(metrics_record(csv), indent=2) + "\n")
+    return csv
 
 
-def merge_metrics(paths: Sequence[str | Path], out: str | Path) -> None:
-    """One JSON of every table's metrics, keyed by table name: the file `dvc metrics show` reads."""
-    merged = {}
-    for path in map(Path, paths):
-        try:
-            merged[path.stem] = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as err:
-            raise InputError(path, f"unreadable metrics file ({err})") from None
-    write_text(out, json.dumps(merged, indent=2) + "\n")
+def metrics_record(csv: pd.DataFrame) -> dict[str, dict[str, float]]:
+    """What `dvc metrics show` and `dvc metrics diff` display for a table: the Average columns per method (the
+    per-category numbers are in the CSV)."""
+    average = [c for c in csv.columns if c.startswith("Average/")]
+    return {method: {c.removeprefix("Average/"): round(float(row[c]), 4) for c in average}
+            for method, row in csv.iterrows()}
 
 
 def stats_row(method: str, category: str, name: str, stats: ErrorStats) -> dict[str, object]:
@@ -100,11 +100,11 @@ def aggregate(per_cloud: pd.DataFrame, protocol: str, metrics: Sequence[str]) ->
     return table
 
 
-def to_csv_frame(table: pd.DataFrame) -> pd.DataFrame:
-    """Flat columns `category/metric` and display method names, rounded as in the paper."""
+def to_csv_frame(table: pd.DataFrame, names: dict[str, str] = METHOD_NAMES) -> pd.DataFrame:
+    """Flat columns `category/metric` and display method names."""
     flat = table.copy()
     flat.columns = [f"{c}/{m}" for c, m in table.columns]
-    flat.index = [METHOD_NAMES.get(m, m) for m in table.index]
+    flat.index = [names.get(m, m) for m in table.index]
     flat.index.name = "method"
     return flat
 
@@ -113,7 +113,7 @@ def _fmt(metric: str, value: float) -> str:
     return f"{value:.3f}".lstrip("0") if metric in HIGHER_IS_BETTER else f"{value:.2f}"
 
 
-def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
+def to_latex(table: pd.DataFrame, caption: str, label: str, names: dict[str, str] = METHOD_NAMES) -> str:
     """A booktabs table like the paper's: two-level header, best value per column in bold."""
     categories = list(dict.fromkeys(c for c, _ in table.columns))
     metrics = list(dict.fromkeys(m for _, m in table.columns))
@@ -122,7 +122,7 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
     spec = "l" + "c" * width * len(categories)
     rules = " ".join(f"\\cmidrule(lr){{{2 + i * width}-{1 + (i + 1) * width}}}" for i in range(len(categories)))
     lines = [
-        "\\begin{table}[t]", "\\centering", f"\\caption{{{_escape(caption)}}}", f"\\label{{{label}}}",
+        "\\begin{table}[t]", "\\centering", f"\\caption{{{latex_escape(caption)}}}", f"\\label{{{label}}}",
         f"\\begin{{tabular}}{{{spec}}}", "\\toprule",
         " & ".join(["Category"] + [f"\\multicolumn{{{width}}}{{c}}{{{c}}}" for c in categories]) + " \\\\",
         rules,
@@ -134,12 +134,12 @@ def to_latex(table: pd.DataFrame, caption: str, label: str) -> str:
         for col in table.columns:
             text = _fmt(col[1], row[col])
             cells.append(f"\\textbf{{{text}}}" if np.isclose(row[col], best[col]) else text)
-        lines.append(" & ".join([_escape(METHOD_NAMES.get(method, method))] + cells) + " \\\\")
+        lines.append(" & ".join([latex_escape(names.get(method, method))] + cells) + " \\\\")
     lines += ["\\bottomrule", "\\end{tabular}", "\\end{table}", ""]
     return "\n".join(lines)
 
 
-def _escape(text: str) -> str:
+def latex_escape(text: str) -> str:
     for char in "&%$#_{}":
         text = text.replace(char, "\\" + char)
     return text

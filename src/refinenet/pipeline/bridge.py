@@ -21,8 +21,8 @@ import sys
 from pathlib import Path
 
 from refinenet import config
-from refinenet.errors import RefineNetError
-from refinenet.pipeline.workflow import STEPS, Step
+from refinenet.errors import ParamsError, RefineNetError
+from refinenet.pipeline.workflow import Pipeline, Step
 
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", "workflow/Snakefile"]
 
@@ -54,9 +54,16 @@ def _env() -> dict[str, str]:
     return {**os.environ, "REFINENET_BRIDGE": "1"}
 
 
+def pipeline() -> Pipeline:
+    return Pipeline(config.read_raw())
+
+
 def run(name: str, cores: str) -> int:
-    step = STEPS[name]
-    targets = step.targets(config.load())
+    steps = pipeline().steps
+    if name not in steps:
+        raise ParamsError("(stages)", f"no step '{name}' in this params file's pipeline ({', '.join(steps)})")
+    step = steps[name]
+    targets = step.targets()
     for path in prune(step, targets):
         print(f"removed orphan {path}")
     # No Snakemake lock: DVC holds the repository's while a stage runs, and a killed `dvc repro` must not leave
@@ -78,11 +85,10 @@ def record() -> int:
     if not Path(".dvc").is_dir() or shutil.which("dvc") is None:
         print("record: no DVC repository here; nothing recorded")
         return 0
-    params = config.load()
     done = up_to_date_files()
     finished = []
-    for step in STEPS.values():
-        targets = step.targets(params)
+    for step in pipeline().steps.values():
+        targets = step.targets()
         if set(targets) <= done:
             prune(step, targets)
             finished.append(step.name)
@@ -97,7 +103,7 @@ def sync() -> int:
     if json.loads(status.stdout or "{}"):
         print("sync: `dvc status` is not clean; run `dvc checkout` or `dvc repro` first", file=sys.stderr)
         return 1
-    targets = [t for step in STEPS.values() for t in step.targets(config.load())]
+    targets = [t for step in pipeline().steps.values() for t in step.targets()]
     return subprocess.run([*SNAKEMAKE, "--touch", "--cores", "1", "--", *targets], env=_env()).returncode
 
 
@@ -105,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     run_p = sub.add_parser("run", help="run one step's jobs through Snakemake (what its DVC stage executes)")
-    run_p.add_argument("step", choices=list(STEPS))
+    run_p.add_argument("step", help="a step's name: its dvc.yaml stage")
     run_p.add_argument("--cores", default=os.environ.get("REFINENET_CORES", "all"))
     sub.add_parser("record", help="record finished Snakemake steps in dvc.lock")
     sub.add_parser("sync", help="mark DVC-restored outputs up to date for Snakemake")

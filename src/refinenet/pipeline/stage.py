@@ -1,7 +1,8 @@
 """What every stage script shares: the params file, CPU thread limits, and one-line errors with exit status 2.
 
-A stage script takes the params file, the files it reads and writes, and the identity of its job (a method or
-a cluster), and nothing else: every setting comes from the typed `Params`, so no default lives in a script.
+A stage script takes the params file, the files it reads and writes, and the identity of its job (a method, a
+cluster, a Refine-Net variant), and nothing else: every setting comes from the typed `Params`, so no default lives
+in a script.
 """
 
 from __future__ import annotations
@@ -31,11 +32,12 @@ def run(doc: str, arguments: Callable[[argparse.ArgumentParser], None],
     parser = argparse.ArgumentParser(description=doc)
     parser.add_argument("--params", default="params.yaml", help="the params file (its active profile applies)")
     parser.add_argument("--threads", type=int, default=1, help="CPU threads this job may use")
+    parser.add_argument("--variant", default=config.FULL, help="the Refine-Net variant whose settings apply")
     arguments(parser)
     args = parser.parse_args()
     limit_threads(args.threads)
     try:
-        main(config.load(args.params), args)
+        main(config.load(args.params, variant=args.variant), args)
     except RefineNetError as err:
         print(f"error: {err}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)

@@ -11,9 +11,11 @@ the same steps in both tools.
 from __future__ import annotations
 
 import argparse
+import functools
+import os
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -22,30 +24,43 @@ import yaml
 from refinenet import config
 from refinenet.config import Params
 from refinenet.data.clouds import SPLITS, CloudSpec, list_clouds
+from refinenet.errors import ParamsError
 from refinenet.estimators.baselines import METHODS as BASELINES
 from refinenet.estimators.mfps import METHODS as MFPS_METHODS
+from refinenet.evaluation.table import METHOD_NAMES
 
 DVC_FILE = Path("dvc.yaml")
 REFINENET = "refinenet"
+FULL = config.FULL
 
-#: File layout, as Snakemake patterns: `{cloud}` is a cloud's key `<split>/<category>/<name>`.
+#: File layout, as Snakemake patterns: `{cloud}` is a cloud's key `<split>/<category>/<name>`, `{variant}` a
+#: Refine-Net variant (params.yaml `variants`; `full` is the default Refine-Net).
 CLOUD = "results/clouds/{cloud}.npz"
-FEATURES = "results/features/{cloud}.npz"
+FEATURES = "results/features/{variant}/{cloud}.npz"
 NORMALS = "results/normals/{method}/{cloud}.npy"
 #: Refine-Net's output is the PCPNet text format, the form users compare with other methods.
-REFINED = f"results/normals/{REFINENET}/{{cloud}}.normals"
-CLUSTER_MODEL = "results/clusters/model.npz"
-MODEL_DIR = f"results/models/{REFINENET}"
+REFINED = f"results/normals/{REFINENET}/{{variant}}/{{cloud}}.normals"
+CLUSTER_MODEL = "results/clusters/{variant}/model.npz"
+MODEL_DIR = "results/models/{variant}"
 NETWORK = f"{MODEL_DIR}/cluster_{{cluster}}"
-HISTORY_DIR = f"results/history/{REFINENET}"
+HISTORY_DIR = "results/history/{variant}"
 HISTORY = f"{HISTORY_DIR}/cluster_{{cluster}}.csv"
 #: Resumable training state, outside every step's outputs so that neither tool clears it before a rerun.
-CHECKPOINT_DIR = f"results/checkpoints/{REFINENET}"
+CHECKPOINT_DIR = "results/checkpoints/{variant}"
 #: The shipped release (`network.release`): committed with the package, so it is not DVC-cached.
 RELEASE = "src/refinenet/shipped"
 TABLE_FILES = {"csv": "reports/{table}.csv", "tex": "reports/{table}.tex", "per_cloud": "reports/per_cloud/{table}.csv"}
 TABLE_METRICS = "reports/metrics/{table}.json"
-METRICS = "reports/metrics.json"
+#: The line plot of a sweep table (e.g. the Kc sweep of fig:cluster).
+TABLE_PLOT = "reports/{table}.png"
+
+
+def fill(pattern: str, **values: object) -> str:
+    """`pattern` with the given wildcards filled in and the others left as Snakemake wildcards."""
+    class Keep(dict):
+        def __missing__(self, key: str) -> str:
+            return f"{{{key}}}"
+    return pattern.format_map(Keep(values))
 
 
 def clouds(params: Params, split: str | None = None) -> list[CloudSpec]:
@@ -68,9 +83,16 @@ def gpus(device: str) -> int:
     return 0 if device == "cpu" else 1
 
 
-def normals_path(method: str, cloud: str) -> str:
-    """Estimated normals of the cloud with key `cloud`."""
-    return REFINED.format(cloud=cloud) if method == REFINENET else NORMALS.format(method=method, cloud=cloud)
+def refinenet(variant: str) -> str:
+    """The method name of a Refine-Net variant in tables: `refinenet` for full, `refinenet/<variant>` otherwise."""
+    return REFINENET if variant == FULL else f"{REFINENET}/{variant}"
+
+
+def variant_of(method: str) -> str | None:
+    """The variant of a Refine-Net method name; None for the other estimators."""
+    if method == REFINENET:
+        return FULL
+    return method.removeprefix(f"{REFINENET}/") if method.startswith(f"{REFINENET}/") else None
 
 
 @dataclass(frozen=True)
@@ -80,24 +102,63 @@ class Table:
     methods: tuple[str, ...]
     metrics: tuple[str, ...]
     title: str
+    labels: tuple[tuple[str, str], ...] = ()
+    """Row names of this table where they differ from the methods' usual names (e.g. full as Refine-Net-Weight)."""
+    sweep: tuple[str, str] | None = None
+    """(params key, symbol): the rows are variants that differ in this key; each is labelled and ordered by its
+    value (the first of equal values kept), and the Average mean error is plotted against it."""
 
     @staticmethod
-    def files(name: str) -> dict[str, str]:
-        """The table's outputs by kind: csv, tex, per_cloud and its metrics record."""
-        return {**{kind: path.format(table=name) for kind, path in TABLE_FILES.items()},
-                "metrics": TABLE_METRICS.format(table=name)}
+    def files(name: str, table: Table | None = None) -> dict[str, str]:
+        """The table's outputs by kind: csv, tex, per_cloud, its metrics record and, for a sweep, the plot."""
+        files = {**{kind: path.format(table=name) for kind, path in TABLE_FILES.items()},
+                 "metrics": TABLE_METRICS.format(table=name)}
+        if table is not None and table.sweep:
+            files["plot"] = TABLE_PLOT.format(table=name)
+        return files
+
+    @property
+    def variants(self) -> list[str]:
+        return [v for v in map(variant_of, self.methods) if v is not None]
 
 
 #: Normal estimators and the params blocks that configure each (their values are named in table captions).
 METHODS = {**{m: ("baselines",) for m in BASELINES}, **{m: ("mfps",) for m in MFPS_METHODS},
            REFINENET: ("mfps", "features", "clustering", "network", "patches", "training")}
 _SYNTHETIC = (*BASELINES, *MFPS_METHODS, REFINENET)
+#: Rows of the ablation table ([P] table:ablation_results), after MFPS and simple MFPS.
+ABLATION = (("normals", "normals"), ("normals_hmps", "normals&HMPs"), ("normals_points", "normals&points"),
+            ("concat", "concat"), ("residual", "residual"), ("rot", "Refine-Net-Rot"), ("trans", "Refine-Net-Trans"),
+            (FULL, "Refine-Net-Weight"))
 TABLES = {
     "table_baselines": Table(BASELINES, ("mean", "rmse"), "Baselines: unoriented angular error (degrees)"),
     "table_synthetic": Table(_SYNTHETIC, ("mean", "rmse"), "Synthetic benchmark: unoriented angular error (degrees)"),
     "table_synthetic_pgp": Table(_SYNTHETIC, ("pgp5", "pgp10"),
                                  "Synthetic benchmark: proportion of good points (error below 5 and 10 degrees)"),
+    "table_ablation": Table((*MFPS_METHODS, *(refinenet(v) for v, _ in ABLATION)), ("mean", "rmse"),
+                            "Ablation study: unoriented angular error (degrees)",
+                            labels=tuple((refinenet(v), label) for v, label in ABLATION)),
+    "table_loss": Table((refinenet("l1"), refinenet(FULL)), ("mean", "rmse"),
+                        "Training loss, L1 against L2: unoriented angular error (degrees)",
+                        labels=((refinenet("l1"), "L1"), (refinenet(FULL), "L2"))),
+    "table_clusters": Table(tuple(refinenet(v) for v in (FULL, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
+                            ("mean", "rmse"), "Number of clusters Kc: unoriented angular error (degrees)",
+                            sweep=("clustering.n_clusters", "Kc")),
 }
+
+
+#: [P] Table network_architecture: the networks whose height-map modules it shows, with their column titles.
+ARCHITECTURE = {FULL: "Refine-Net", "normals_hmps": "Ablation (normals&HMPs)"}
+ARCHITECTURE_FILES = {"csv": "reports/table_architecture.csv", "tex": "reports/table_architecture.tex",
+                      "layers": "reports/table_architecture_layers.csv"}
+
+
+COMPARISON_FILES = {"md": "reports/paper_comparison.md", "tex": "reports/paper_comparison.tex"}
+
+
+#: The main job (`snakemake main`, scripts/run.sh): the synthetic benchmark's tables and the shipped release, within
+#: the default profile's budget. The ablation tables, each trained variant by variant, are built by the full run.
+MAIN = ("table_baselines", "table_synthetic", "table_synthetic_pgp", "release")
 
 
 @dataclass(frozen=True)
@@ -106,17 +167,20 @@ class Step:
 
     name: str
     family: str
-    """The rule file and stage script shared by the instances of a step (e.g. clouds_train and clouds_test)."""
+    """The rule file and stage script shared by the instances of a step (e.g. clouds_train and clouds_test, or
+    training and training_l1)."""
     modules: tuple[str, ...]
     """Library modules (dotted, below `refinenet`) that the stage script imports."""
     keys: tuple[str, ...]
     """params.yaml keys the step reads; a change of any of them reruns it in both tools."""
     deps: tuple[str, ...]
     outs: tuple[str, ...]
-    targets: Callable[[Params], list[str]]
-    """Every file the step makes for the given params."""
+    targets: Callable[[], list[str]]
+    """Every file the step makes for the run's params (listing the clouds only when asked)."""
     metrics: tuple[str, ...] = ()
     plots: tuple[str, ...] = ()
+    variant: str = FULL
+    """The Refine-Net variant whose settings the step runs with."""
 
     @property
     def code(self) -> list[str]:
@@ -135,114 +199,242 @@ _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geo
              "data.noise")
 _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.devices", "network.training",
             "features.patches", "evaluation.metrics")
-_TABLE = ("evaluation.table", "evaluation.metrics", "data.io", "data.shapes", "data.meshes")
+_TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipeline.workflow", "estimators.baselines",
+          "estimators.mfps", *_DATA, *_GEOMETRY)
 
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
 _ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size", "network",
                  "patches")
+#: The steps run once per Refine-Net variant, the keys each reads, and the steps whose files it reads. A variant
+#: has its own instance of a step when its overrides reach the step's keys or it has one of an upstream step;
+#: otherwise it uses full's files.
+VARIANT_STEPS = {
+    "features": (("features",), ()),
+    "clustering": (("clustering", "seed"), ("features",)),
+    "training": ((*_ARCHITECTURE, "training", "seed"), ("features", "clustering")),
+    "inference": ((*_ARCHITECTURE, "inference", "seed"), ("features", "clustering", "training")),
+}
 
 
-def _normals_step(name: str, family: str, modules: tuple[str, ...], keys: tuple[str, ...],
-                  methods: tuple[str, ...], splits: tuple[str, ...] = ("test",)) -> Step:
-    """A step estimating normals of every cloud of `splits` with each of `methods`."""
-    return Step(
-        name=name, family=family, modules=(*modules, *_STAGE), keys=keys,
-        deps=tuple(f"results/clouds/{s}" for s in splits),
-        outs=tuple(f"results/normals/{m}/{s}" for m in methods for s in splits),
-        targets=lambda p: [normals_path(m, c.key) for m in methods for s in splits for c in clouds(p, s)],
-    )
+def _leaves(tree: Any, prefix: str = "") -> list[str]:
+    if not isinstance(tree, dict) or not tree:
+        return [prefix.rstrip(".")]
+    return [leaf for key, value in tree.items() for leaf in _leaves(value, f"{prefix}{key}.")]
 
 
-def _table_step(name: str, table: Table) -> Step:
-    blocks = tuple(dict.fromkeys(b for m in table.methods for b in METHODS[m]))
-    files = Table.files(name)
-    return Step(
-        name=name, family="table", modules=(*_TABLE, "pipeline.workflow", "estimators.baselines", "estimators.mfps",
-                                           *_DATA, *_GEOMETRY, *_STAGE),
-        keys=("data.source", "data.path", "data.n_points", "evaluation.protocol", *blocks),
-        deps=("results/clouds/test", *(f"results/normals/{m}/test" for m in table.methods)),
-        outs=(files["csv"], files["tex"], files["per_cloud"]), metrics=(files["metrics"],),
-        targets=lambda p: list(files.values()),
-    )
+def _overlaps(a: str, b: str) -> bool:
+    return a == b or a.startswith(f"{b}.") or b.startswith(f"{a}.")
 
 
-STEPS: dict[str, Step] = {s.name: s for s in (
-    *(Step(
-        name=f"clouds_{split}", family="clouds", modules=(*_DATA, *_STAGE), keys=("seed", "data", f"noise.{split}"),
-        deps=(), outs=(f"results/clouds/{split}",),
-        targets=lambda p, split=split: [CLOUD.format(cloud=c.key) for c in clouds(p, split)],
-    ) for split in SPLITS),
-    _normals_step("baselines", "baselines", ("estimators.baselines", "data.io", "data.shapes", "data.meshes",
-                                             *_GEOMETRY), ("baselines",), BASELINES),
-    _normals_step("mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"), ("mfps",), SPLITS),
-    _normals_step("simple_mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"),
-                  ("simple_mfps",)),
-    Step(
-        name="features", family="features", modules=(*_FEATURES, *_STAGE), keys=("features",),
-        deps=(*(f"results/clouds/{s}" for s in SPLITS), *(f"results/normals/mfps/{s}" for s in SPLITS)),
-        outs=tuple(f"results/features/{s}" for s in SPLITS),
-        targets=lambda p: [FEATURES.format(cloud=c.key) for c in clouds(p)],
-    ),
-    Step(
-        name="clustering", family="clustering", modules=(*_FEATURES, "network.clustering", *_STAGE),
-        keys=("clustering", "seed"), deps=("results/features/train",), outs=("results/clusters",),
-        targets=lambda p: [CLUSTER_MODEL],
-    ),
-    Step(
-        name="training", family="training", modules=(*_NETWORK, *_STAGE),
-        keys=(*_ARCHITECTURE, "training", "seed"),
-        deps=("results/clouds/train", "results/features/train", "results/clusters"), outs=(MODEL_DIR,),
-        plots=(HISTORY_DIR,),
-        targets=lambda p: [path.format(cluster=c) for c in range(p.clustering.n_clusters)
-                           for path in (NETWORK, HISTORY)],
-    ),
-    Step(
-        name="inference", family="inference", modules=(*_NETWORK, "network.inference", *_DATA, *_STAGE),
-        keys=(*_ARCHITECTURE, "inference", "seed"),
-        deps=("results/clouds/test", "results/features/test", "results/clusters", MODEL_DIR),
-        outs=(f"results/normals/{REFINENET}/test",),
-        targets=lambda p: [normals_path(REFINENET, c.key) for c in clouds(p, "test")],
-    ),
-    Step(
-        name="release", family="release",
-        modules=(*_NETWORK, "network.inference", "network.release", "geometry.scale", *_DATA, *_STAGE),
-        keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches", "training",
-              "inference", "evaluation"),
-        deps=("results/clouds/train", "results/clouds/test", "results/features/test", "results/clusters", MODEL_DIR),
-        outs=(RELEASE,), targets=lambda p: [RELEASE],
-    ),
-    *(_table_step(name, table) for name, table in TABLES.items()),
-    Step(
-        name="metrics", family="metrics", modules=(*_TABLE, *_STAGE),
-        keys=(), deps=tuple(Table.files(n)["metrics"] for n in TABLES), outs=(), metrics=(METRICS,),
-        targets=lambda p: [METRICS],
-    ),
-)}
+def override_keys(raw: dict[str, Any], variant: str) -> set[str]:
+    """The dotted keys a variant overrides, in params.yaml's `variants` and in any profile's."""
+    blocks = [(raw.get("variants") or {}).get(variant)]
+    blocks += [((p or {}).get("variants") or {}).get(variant) for p in (raw.get("profiles") or {}).values()]
+    return {leaf for block in blocks if block for leaf in _leaves(block)}
 
 
-def caption(title: str, params: Params, methods: tuple[str, ...]) -> str:
-    """A table caption naming the profile, the data and the settings of every method in the table."""
-    d, b, m = params.data, params.baselines, params.mfps
-    parts = [
-        f"{title}, {params.evaluation.protocol} protocol.",
-        f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
-        + f", {d.n_points} points per cloud.",
-    ]
-    if set(BASELINES) & set(methods):
-        parts.append(f"PCA/Jet K = {b.pca_k}/{b.jet_k} ({b.big_noise_k} for BigNoise), jet degree {b.jet_degree}.")
-    if set(MFPS_METHODS) & set(methods):
-        parts.append(f"MFPS K = {{{', '.join(map(str, m.scales))}}}, R = {m.trials}, "
-                     f"theta_t = {m.theta_t} deg, |A| <= {m.a_max}, eta = {m.eta}.")
-    if REFINENET in methods:
-        f, n, t, pa = params.features, params.network, params.training, params.patches
-        parts.append(
-            f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
-            f"Kc = {params.clustering.n_clusters}, X = {f.n_normals}"
-            f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}, "
-            f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
-            + (f", at most {t.max_train_points_per_cloud} training points per cloud"
-               if t.max_train_points_per_cloud else "") + ".")
-    return " ".join(parts)
+def owners(raw: dict[str, Any], variant: str) -> dict[str, str]:
+    """For each per-variant step, the variant whose files `variant` uses: itself or full. Decided by the keys
+    written, not their values, so that the pipeline (and dvc.yaml) is the same whichever profile is active."""
+    overridden = override_keys(raw, variant) if variant != FULL else set()
+    own: dict[str, str] = {}
+    for family, (keys, upstream) in VARIANT_STEPS.items():
+        reached = any(_overlaps(k, o) for k in keys for o in overridden)
+        own[family] = variant if reached or any(own[u] == variant for u in upstream) else FULL
+    return own
+
+
+class Pipeline:
+    """The steps of one params file: every Refine-Net variant's settings, which files each variant owns, and one
+    `Step` per DVC stage and Snakemake rule."""
+
+    def __init__(self, raw: dict[str, Any], source: str = "params.yaml"):
+        self.raw = raw
+        self.resolved = config.resolve_variants(raw, source)
+        """Each variant's resolved params (dotted keys apply: `config.get(resolved[v], key)`)."""
+        self.params = {v: Params.from_resolved(resolved, source) for v, resolved in self.resolved.items()}
+        self.full = self.params[FULL]
+        for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE)]:
+            for v in variants:
+                if v not in self.params:
+                    raise ParamsError("variants", f"{name} needs the variant '{v}', which is not defined", source)
+        self.owners = {v: owners(raw, v) for v in self.params}
+        self.steps: dict[str, Step] = {s.name: s for s in self._steps()}
+
+    @functools.cached_property
+    def clouds(self) -> list[CloudSpec]:
+        return clouds(self.full)
+
+    def owner(self, variant: str, family: str) -> str:
+        return self.owners[variant][family]
+
+    def family(self, name: str) -> list[Step]:
+        """The instances of one step family, full's first."""
+        return [s for s in self.steps.values() if s.family == name]
+
+    def keys(self, split: str | None = None) -> list[str]:
+        return [c.key for c in self.clouds if split in (None, c.split)]
+
+    def normals_path(self, method: str, cloud: str) -> str:
+        """Estimated normals of the cloud with key `cloud` (a Refine-Net variant's from the variant that owns them)."""
+        variant = variant_of(method)
+        if variant is None:
+            return NORMALS.format(method=method, cloud=cloud)
+        return REFINED.format(variant=self.owner(variant, "inference"), cloud=cloud)
+
+    def rows(self, table: Table) -> dict[str, str]:
+        """The table's rows, method -> row name. A sweep table's rows are named and ordered by the swept value,
+        the first row of equal values kept (in the smoke profile kc2 repeats full's Kc = 2)."""
+        if not table.sweep:
+            return {m: dict(table.labels).get(m, METHOD_NAMES.get(m, m)) for m in table.methods}
+        key, symbol = table.sweep
+        first = {self.swept(m, key): m for m in reversed(table.methods)}
+        return {first[value]: f"{symbol} = {value}" for value in sorted(first)}
+
+    def swept(self, method: str, key: str) -> Any:
+        """The value of a dotted params key for a Refine-Net variant's method."""
+        return config.get(self.resolved[variant_of(method)], key)
+
+    def caption(self, table: Table) -> str:
+        """A table caption naming the profile, the data, the settings of every method in the table and what each
+        variant changes."""
+        params, methods = self.full, table.methods
+        d, b, m = params.data, params.baselines, params.mfps
+        parts = [
+            f"{table.title}, {params.evaluation.protocol} protocol.",
+            f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
+            + f", {d.n_points} points per cloud.",
+        ]
+        if set(BASELINES) & set(methods):
+            parts.append(f"PCA/Jet K = {b.pca_k}/{b.jet_k} ({b.big_noise_k} for BigNoise), jet degree {b.jet_degree}.")
+        if set(MFPS_METHODS) & set(methods):
+            parts.append(f"MFPS K = {{{', '.join(map(str, m.scales))}}}, R = {m.trials}, "
+                         f"theta_t = {m.theta_t} deg, |A| <= {m.a_max}, eta = {m.eta}.")
+        if table.variants:
+            f, n, t, pa = params.features, params.network, params.training, params.patches
+            parts.append(
+                f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
+                f"Kc = {params.clustering.n_clusters}, X = {f.n_normals}"
+                f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}, "
+                f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
+                + (f", at most {t.max_train_points_per_cloud} training points per cloud"
+                   if t.max_train_points_per_cloud else "") + ".")
+        changed = [f"{v}: " + ", ".join(f"{k} = {value}" for k, value in self.changes(v).items())
+                   for v in table.variants if v != FULL]
+        if changed:
+            parts.append("Variants of Refine-Net (what each changes): " + "; ".join(changed) + ".")
+        return " ".join(parts)
+
+    def changes(self, variant: str) -> dict[str, Any]:
+        """The settings in which a variant differs from full, by dotted key."""
+        def flat(tree: Any, prefix: str = "") -> dict[str, Any]:
+            if isinstance(tree, dict):
+                return {k: v for key, value in tree.items() for k, v in flat(value, f"{prefix}{key}.").items()}
+            return {prefix.rstrip("."): tree}
+        full, other = flat(asdict(self.full)), flat(asdict(self.params[variant]))
+        return {k: other[k] for k in other if other[k] != full.get(k)}
+
+    def _files(self, family: str, variant: str, split: str) -> str:
+        """The folder of a per-variant step's files of one split (or the cluster model's, the networks')."""
+        owner = self.owner(variant, family)
+        return {"features": f"results/features/{owner}/{split}", "clustering": f"results/clusters/{owner}",
+                "training": MODEL_DIR.format(variant=owner),
+                "inference": f"results/normals/{REFINENET}/{owner}/{split}"}[family]
+
+    def _normals_step(self, name: str, family: str, modules: tuple[str, ...], keys: tuple[str, ...],
+                      methods: tuple[str, ...], splits: tuple[str, ...] = ("test",)) -> Step:
+        """A step estimating normals of every cloud of `splits` with each of `methods`."""
+        return Step(
+            name=name, family=family, modules=(*modules, *_STAGE), keys=keys,
+            deps=tuple(f"results/clouds/{s}" for s in splits),
+            outs=tuple(f"results/normals/{m}/{s}" for m in methods for s in splits),
+            targets=lambda: [self.normals_path(m, k) for m in methods for s in splits for k in self.keys(s)],
+        )
+
+    def _variant_steps(self, v: str) -> list[Step]:
+        p, own, files = self.params[v], self.owners[v], self._files
+        name = {family: family if v == FULL else f"{family}_{v}" for family in VARIANT_STEPS}
+        keys = {family: keys for family, (keys, _) in VARIANT_STEPS.items()}
+        made = {
+            "features": lambda: Step(
+                name=name["features"], family="features", modules=(*_FEATURES, *_STAGE), keys=keys["features"],
+                deps=(*(f"results/clouds/{s}" for s in SPLITS), *(f"results/normals/mfps/{s}" for s in SPLITS)),
+                outs=tuple(files("features", v, s) for s in SPLITS), variant=v,
+                targets=lambda: [FEATURES.format(variant=v, cloud=k) for k in self.keys()],
+            ),
+            "clustering": lambda: Step(
+                name=name["clustering"], family="clustering", modules=(*_FEATURES, "network.clustering", *_STAGE),
+                keys=keys["clustering"], deps=(files("features", v, "train"),), outs=(files("clustering", v, ""),),
+                targets=lambda: [CLUSTER_MODEL.format(variant=v)], variant=v,
+            ),
+            "training": lambda: Step(
+                name=name["training"], family="training", modules=(*_NETWORK, *_STAGE), keys=keys["training"],
+                deps=("results/clouds/train", files("features", v, "train"), files("clustering", v, "")),
+                outs=(MODEL_DIR.format(variant=v),), plots=(HISTORY_DIR.format(variant=v),), variant=v,
+                targets=lambda: [path.format(variant=v, cluster=c) for c in range(p.clustering.n_clusters)
+                                 for path in (NETWORK, HISTORY)],
+            ),
+            "inference": lambda: Step(
+                name=name["inference"], family="inference", modules=(*_NETWORK, "network.inference", *_DATA, *_STAGE),
+                keys=keys["inference"],
+                deps=("results/clouds/test", files("features", v, "test"), files("clustering", v, ""),
+                      files("training", v, "")),
+                outs=(files("inference", v, "test"),), variant=v,
+                targets=lambda: [REFINED.format(variant=v, cloud=k) for k in self.keys("test")],
+            ),
+        }
+        return [make() for family, make in made.items() if own[family] == v]
+
+    def _table_step(self, name: str, table: Table) -> Step:
+        blocks = tuple(dict.fromkeys(b for m in table.methods for b in METHODS[REFINENET if variant_of(m) else m]))
+        variants = tuple(f"variants.{v}" for v in table.variants if v != FULL and _exists(self.raw, f"variants.{v}"))
+        files = Table.files(name, table)
+        normals = dict.fromkeys(os.path.dirname(self.normals_path(m, "test/x")) for m in table.methods)
+        return Step(
+            name=name, family="table", modules=(*_TABLE, *_STAGE),
+            keys=("data.source", "data.path", "data.n_points", "evaluation.protocol", *blocks, *variants),
+            deps=("results/clouds/test", *normals),
+            outs=tuple(path for kind, path in files.items() if kind != "metrics"), metrics=(files["metrics"],),
+            targets=lambda: list(files.values()),
+        )
+
+    def _steps(self) -> list[Step]:
+        return [
+            *(Step(
+                name=f"clouds_{split}", family="clouds", modules=(*_DATA, *_STAGE),
+                keys=("seed", "data", f"noise.{split}"), deps=(), outs=(f"results/clouds/{split}",),
+                targets=lambda split=split: [CLOUD.format(cloud=k) for k in self.keys(split)],
+            ) for split in SPLITS),
+            self._normals_step("baselines", "baselines", ("estimators.baselines", "data.io", "data.shapes",
+                                                          "data.meshes", *_GEOMETRY), ("baselines",), BASELINES),
+            self._normals_step("mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"), ("mfps",),
+                               SPLITS),
+            self._normals_step("simple_mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"),
+                               ("simple_mfps",)),
+            *(step for v in self.params for step in self._variant_steps(v)),
+            Step(
+                name="release", family="release",
+                modules=(*_NETWORK, "network.inference", "network.release", "geometry.scale", *_DATA, *_STAGE),
+                keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
+                      "training", "inference", "evaluation"),
+                deps=("results/clouds/train", "results/clouds/test", self._files("features", FULL, "test"),
+                      self._files("clustering", FULL, ""), self._files("training", FULL, "")),
+                outs=(RELEASE,), targets=lambda: [RELEASE],
+            ),
+            *(self._table_step(name, table) for name, table in TABLES.items()),
+            Step(
+                name="paper_comparison", family="comparison", modules=("evaluation.paper", *_TABLE, *_STAGE),
+                keys=("data.source", "data.path", "data.n_points", "evaluation.protocol"),
+                deps=tuple(Table.files(name)["csv"] for name in TABLES), outs=tuple(COMPARISON_FILES.values()),
+                targets=lambda: list(COMPARISON_FILES.values()),
+            ),
+            Step(
+                name="table_architecture", family="architecture",
+                modules=("network.summary", "network.model", *_TABLE, *_STAGE),
+                keys=(*_ARCHITECTURE, *(f"variants.{v}" for v in ARCHITECTURE if v != FULL)),
+                deps=(), outs=tuple(ARCHITECTURE_FILES.values()), targets=lambda: list(ARCHITECTURE_FILES.values()),
+            ),
+        ]
 
 
 def _exists(tree: Any, dotted: str) -> bool:
@@ -254,10 +446,12 @@ def _exists(tree: Any, dotted: str) -> bool:
 
 
 def tracked_keys(raw: dict[str, Any], step: Step) -> list[str]:
-    """The params keys a step depends on: `profile`, its own keys, and every profile's overrides of them."""
-    keys = ["profile", *step.keys]
+    """The params keys a step depends on: `profile`, its own keys, its variant's overrides of them, and every
+    profile's overrides of all these."""
+    overrides = [f"variants.{step.variant}.{k}" for k in step.keys] if step.variant != FULL else []
+    keys = ["profile", *step.keys, *(k for k in overrides if _exists(raw, k))]
     for name, block in (raw.get("profiles") or {}).items():
-        keys += [f"profiles.{name}.{k}" for k in step.keys if _exists(block, k)]
+        keys += [f"profiles.{name}.{k}" for k in (*step.keys, *overrides) if _exists(block, k)]
     return keys
 
 
@@ -270,7 +464,7 @@ def tracked_params(raw: dict[str, Any], step: Step) -> dict[str, Any]:
 def dvc_yaml(raw: dict[str, Any]) -> dict[str, Any]:
     """The dvc.yaml that mirrors the Snakemake rules: one stage per step, run through the bridge."""
     stages: dict[str, Any] = {}
-    for step in STEPS.values():
+    for step in Pipeline(raw).steps.values():
         stage: dict[str, Any] = {
             "cmd": f"python -m refinenet.pipeline.bridge run {step.name}",
             "deps": [*step.code, *step.deps],
