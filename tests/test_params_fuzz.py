@@ -55,8 +55,9 @@ def dotted(key: Key) -> str:
 
 
 def resolved_key(key: Key) -> Key:
-    """The key a profile's leaf overrides (`profiles.cpu.data.n_points` -> `data.n_points`)."""
-    return key[2:] if key[0] == "profiles" else key
+    """The key a profile's or a Refine-Net variant's leaf overrides (`profiles.cpu.data.n_points` ->
+    `data.n_points`, `variants.l1.training.loss` -> `training.loss`)."""
+    return key[2:] if key[0] in ("profiles", "variants") else key
 
 
 def schema_of(key: Key) -> dict[str, Any]:
