@@ -49,9 +49,13 @@ def start(repo: Path, tool: str, log: Path) -> subprocess.Popen:
 
 
 def writing(repo: Path) -> bool:
-    """A job is writing an output: a temporary file of the atomic writer exists."""
-    return any(p.name.startswith(".") and ".tmp" in p.name for folder in ("results", "reports")
-               if (repo / folder).is_dir() for p in (repo / folder).rglob(".*"))
+    """A job is writing an output: a temporary file of the atomic writer exists. (A folder that a tool removes
+    while it is searched ends the search: no write is seen this time.)"""
+    try:
+        return any(p.name.startswith(".") and ".tmp" in p.name for folder in ("results", "reports")
+                   if (repo / folder).is_dir() for p in (repo / folder).rglob(".*"))
+    except FileNotFoundError:
+        return False
 
 
 def training_resumable(proc: subprocess.Popen, repo: Path) -> bool:
