@@ -48,6 +48,12 @@ def start(repo: Path, tool: str, log: Path) -> subprocess.Popen:
                                 start_new_session=True, env=isolated(repo))
 
 
+def main_reports(repo: Path) -> dict[str, bytes]:
+    """The report files of the main job's steps (a copy of the working tree also holds the committed reports of
+    other steps, which the main job does not make)."""
+    return {name: data for name, data in report_files(repo).items() if Path(name).stem in MAIN}
+
+
 def writing(repo: Path) -> bool:
     """A job is writing an output: a temporary file of the atomic writer exists. (A folder that a tool removes
     while it is searched ends the search: no write is seen this time.)"""
@@ -104,7 +110,7 @@ def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, refere
         began = time.monotonic()
         sh(reference, *COMMANDS["snakemake"])
         length = time.monotonic() - began
-    expected = {name: data for name, data in report_files(reference).items() if Path(name).stem in MAIN}
+    expected = main_reports(reference)
     rng = random.Random(seed)
     results = {"reference_seconds": round(length, 1), "report_files": len(expected), "tools": {}}
     for tool in tools:
@@ -123,7 +129,7 @@ def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, refere
         if tool == "snakemake":
             sh(victim, *COMMANDS[tool], "--unlock")
         sh(victim, *COMMANDS[tool])
-        got = report_files(victim)
+        got = main_reports(victim)
         different = different_files(expected, got)
         up_to_date = ("Nothing to be done" in sh(victim, sys.executable, "-m", "snakemake", "-n", "main").stdout
                       and not json.loads(sh(victim, "dvc", "status", "--json", *MAIN).stdout or "{}"))
