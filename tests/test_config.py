@@ -84,6 +84,8 @@ def test_params_load_into_typed_blocks_from_any_working_directory(tmp_path, monk
     [
         ("features.hmp_size", 6, "features: hmp_size must be a positive odd number"),
         ("mfps.scales", [100, 50], "mfps: MFPSConfig.scales: must be distinct and increasing"),
+        ("features.initial", "pcpnet", "features: initial 'pcpnet' is neither one of ('mfps', 'pca', 'jet') nor an "
+                                       "existing folder"),
     ],
 )
 def test_values_the_schema_cannot_judge_name_their_block(key, value, message):

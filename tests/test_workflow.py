@@ -116,6 +116,34 @@ def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
     assert not any(k.startswith("variants") for k in workflow.tracked_keys(raw, STEPS["training"]))
 
 
+def test_refining_another_estimator_trains_on_its_normals(tmp_path):
+    """pca_init refines PCA's normals: its features start from them (so every per-variant step is its own), and PCA
+    runs on the training clouds too, a step of its own that exists only while some variant needs it. A folder of
+    normals from any estimator stands in for the estimator; a missing one is reported under the variant's key."""
+    assert set(PIPELINE.owners["pca_init"].values()) == {"pca_init"}
+    assert STEPS["features_pca_init"].deps == ("results/clouds/train", "results/clouds/test",
+                                               "results/normals/pca/train", "results/normals/pca/test")
+    assert STEPS["features"].deps[2:] == ("results/normals/mfps/train", "results/normals/mfps/test")
+    assert (STEPS["baselines"].split, STEPS["baselines_train"].split) == ("test", "train")
+    assert STEPS["baselines_train"].outs == ("results/normals/pca/train", "results/normals/jet/train")
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    del raw["variants"]["pca_init"], raw["variants"]["jet_init"]
+    raw["variants"]["mine"] = {"features": {"initial": str(tmp_path)}}
+    with pytest.raises(ParamsError, match="table_initial needs the variant 'pca_init'"):
+        workflow.Pipeline(raw)
+    tables = dict(workflow.TABLES)
+    tables["table_initial"] = workflow.Table((workflow.refinenet("mine"),), ("mean",), "mine")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(workflow, "TABLES", tables)
+        pipeline = workflow.Pipeline(raw)
+        assert "baselines_train" not in pipeline.steps
+        assert pipeline.initial_path("mine", "test/SharpFeature/a") == f"{tmp_path}/test/SharpFeature/a.normals"
+        assert pipeline.steps["features_mine"].deps[2:] == (f"{tmp_path}/train", f"{tmp_path}/test")
+        raw["variants"]["mine"]["features"]["initial"] = str(tmp_path / "absent")
+        with pytest.raises(ParamsError, match=r"variants\.mine\.features: initial '.*absent' is neither one of"):
+            workflow.Pipeline(raw)
+
+
 def test_the_pipeline_is_the_same_whichever_profile_is_active():
     """Which files a variant owns follows the keys it overrides, not their values: dvc.yaml needs no regeneration
     when a user switches profile (in smoke kc2 equals full's Kc and is still a step of its own)."""

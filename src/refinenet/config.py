@@ -165,6 +165,8 @@ FRAME_MODES = ("canonical", "faithful")
 
 
 HEIGHT_DTYPES = ("float16", "float32")
+#: The estimators whose normals the pipeline computes and Refine-Net can refine (params.yaml `features.initial`).
+INITIAL_ESTIMATORS = ("mfps", "pca", "jet")
 
 
 @dataclass(frozen=True)
@@ -191,10 +193,16 @@ class FeatureConfig:
     heights_dtype: str
     """Storage type of the height maps: float16 halves the cache (heights lie within +-0.3 in units of the extent,
     so the rounding error is at most 1.2e-4); float32 keeps them exact."""
+    initial: str = "mfps"
+    """The normals Refine-Net refines: an estimator of INITIAL_ESTIMATORS (MFPS, the paper's) or a folder holding
+    any other estimator's, `<folder>/<split>/<category>/<name>.normals` per cloud ([P] "PCPNet-ms + Refine-Net").
+    Releases exported before the key existed were trained on MFPS, hence the default."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
         object.__setattr__(self, "sigma_r", tuple(float(s) for s in self.sigma_r))
+        if self.initial not in INITIAL_ESTIMATORS and not Path(self.initial).is_dir():
+            raise ValueError(f"initial '{self.initial}' is neither one of {INITIAL_ESTIMATORS} nor an existing folder")
         if not self.r_f > 0:
             raise ValueError(f"r_f must be positive, got {self.r_f}")
         for name in ("sigma_s", "sigma_r"):

@@ -1,20 +1,20 @@
 # Clouds, one step per split: sample each shape or mesh and add seeded Gaussian noise, or read a given cloud.
 
-for split in ("train", "test"):
+for step in PIPE.family("clouds"):
 
     rule:
         name:
-            f"clouds_{split}"
+            step.name
         message:
             "cloud {wildcards.cloud}"
         input:
-            code=PIPE.steps[f"clouds_{split}"].code,
+            code=step.code,
         output:
             wf.CLOUD,
         wildcard_constraints:
-            cloud=f"{split}/[^/]+/[^/]+",
+            cloud=rf"{step.split}/[^/]+/[^/]+",
         params:
-            tracked=tracked(f"clouds_{split}"),
+            tracked=tracked(step.name),
         log:
             "logs/clouds/{cloud}.log",
         benchmark:

@@ -12,7 +12,7 @@ for step in PIPE.family("features"):
         input:
             code=step.code,
             cloud=wf.CLOUD,
-            initial=PIPE.normals_path("mfps", "{cloud}"),
+            initial=PIPE.initial_path(step.variant, "{cloud}"),
         output:
             wf.fill(wf.FEATURES, variant=step.variant),
         params:

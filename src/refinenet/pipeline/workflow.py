@@ -141,6 +141,12 @@ TABLES = {
     "table_loss": Table((refinenet("l1"), refinenet(FULL)), ("mean", "rmse"),
                         "Training loss, L1 against L2: unoriented angular error (degrees)",
                         labels=((refinenet("l1"), "L1"), (refinenet(FULL), "L2"))),
+    "table_initial": Table(("pca", refinenet("pca_init"), "jet", refinenet("jet_init"), "mfps", refinenet(FULL)),
+                           ("mean", "rmse", "pgp10"),
+                           "Refine-Net on other initial normals: unoriented angular error (degrees) and PGP10",
+                           labels=((refinenet("pca_init"), "PCA + Refine-Net"),
+                                   (refinenet("jet_init"), "Jet + Refine-Net"),
+                                   (refinenet(FULL), "MFPS + Refine-Net"))),
     "table_clusters": Table(tuple(refinenet(v) for v in (FULL, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
                             ("mean", "rmse"), "Number of clusters Kc: unoriented angular error (degrees)",
                             sweep=("clustering.n_clusters", "Kc")),
@@ -181,6 +187,8 @@ class Step:
     plots: tuple[str, ...] = ()
     variant: str = FULL
     """The Refine-Net variant whose settings the step runs with."""
+    split: str | None = None
+    """The one split whose clouds the step covers, where its instances divide the work by split."""
 
     @property
     def code(self) -> list[str]:
@@ -252,7 +260,7 @@ class Pipeline:
         self.raw = raw
         self.resolved = config.resolve_variants(raw, source)
         """Each variant's resolved params (dotted keys apply: `config.get(resolved[v], key)`)."""
-        self.params = {v: Params.from_resolved(resolved, source) for v, resolved in self.resolved.items()}
+        self.params = {v: _typed(v, resolved, source) for v, resolved in self.resolved.items()}
         self.full = self.params[FULL]
         for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE)]:
             for v in variants:
@@ -281,6 +289,13 @@ class Pipeline:
         if variant is None:
             return NORMALS.format(method=method, cloud=cloud)
         return REFINED.format(variant=self.owner(variant, "inference"), cloud=cloud)
+
+    def initial_path(self, variant: str, cloud: str) -> str:
+        """The normals the features of `variant` start from, for the cloud with key `cloud`."""
+        initial = self.params[variant].features.initial
+        if initial in config.INITIAL_ESTIMATORS:
+            return self.normals_path(initial, cloud)
+        return f"{initial}/{cloud}.normals"
 
     def rows(self, table: Table) -> dict[str, str]:
         """The table's rows, method -> row name. A sweep table's rows are named and ordered by the swept value,
@@ -349,6 +364,7 @@ class Pipeline:
             deps=tuple(f"results/clouds/{s}" for s in splits),
             outs=tuple(f"results/normals/{m}/{s}" for m in methods for s in splits),
             targets=lambda: [self.normals_path(m, k) for m in methods for s in splits for k in self.keys(s)],
+            split=splits[0] if len(splits) == 1 else None,
         )
 
     def _variant_steps(self, v: str) -> list[Step]:
@@ -358,7 +374,8 @@ class Pipeline:
         made = {
             "features": lambda: Step(
                 name=name["features"], family="features", modules=(*_FEATURES, *_STAGE), keys=keys["features"],
-                deps=(*(f"results/clouds/{s}" for s in SPLITS), *(f"results/normals/mfps/{s}" for s in SPLITS)),
+                deps=(*(f"results/clouds/{s}" for s in SPLITS),
+                      *(os.path.dirname(self.initial_path(v, f"{s}/x")) for s in SPLITS)),
                 outs=tuple(files("features", v, s) for s in SPLITS), variant=v,
                 targets=lambda: [FEATURES.format(variant=v, cloud=k) for k in self.keys()],
             ),
@@ -403,10 +420,12 @@ class Pipeline:
             *(Step(
                 name=f"clouds_{split}", family="clouds", modules=(*_DATA, *_STAGE),
                 keys=("seed", "data", f"noise.{split}"), deps=(), outs=(f"results/clouds/{split}",),
-                targets=lambda split=split: [CLOUD.format(cloud=k) for k in self.keys(split)],
+                targets=lambda split=split: [CLOUD.format(cloud=k) for k in self.keys(split)], split=split,
             ) for split in SPLITS),
-            self._normals_step("baselines", "baselines", ("estimators.baselines", "data.io", "data.shapes",
-                                                          "data.meshes", *_GEOMETRY), ("baselines",), BASELINES),
+            *(self._normals_step(name, "baselines", ("estimators.baselines", "data.io", "data.shapes", "data.meshes",
+                                                     *_GEOMETRY), ("baselines",), BASELINES, (split,))
+              for name, split in (("baselines", "test"), ("baselines_train", "train"))
+              if split == "test" or any(p.features.initial in BASELINES for p in self.params.values())),
             self._normals_step("mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"), ("mfps",),
                                SPLITS),
             self._normals_step("simple_mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"),
@@ -435,6 +454,17 @@ class Pipeline:
                 deps=(), outs=tuple(ARCHITECTURE_FILES.values()), targets=lambda: list(ARCHITECTURE_FILES.values()),
             ),
         ]
+
+
+def _typed(variant: str, resolved: dict[str, Any], source: str) -> Params:
+    """A variant's typed params; full's are checked first, so a value only a variant's overrides make bad (e.g. a
+    missing folder of initial normals) is reported under the variant's key."""
+    try:
+        return Params.from_resolved(resolved, source)
+    except ParamsError as err:
+        if variant == FULL:
+            raise
+        raise ParamsError(f"variants.{variant}.{err.key}", err.problem, source) from None
 
 
 def _exists(tree: Any, dotted: str) -> bool:
