@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from refinenet.pipeline.timing import read_benchmark
 from refinenet.pipeline.workflow import FULL, VARIANT_STEPS
 
 
@@ -32,8 +33,7 @@ def job_benchmarks(run_dir: Path) -> pd.DataFrame:
         elif rule in VARIANT_STEPS:
             variant = parts[1].removesuffix(".benchmark.tsv")
             rule = rule if variant == FULL else f"{rule}_{variant}"
-        bench = pd.read_csv(path, sep="\t")
-        rows.append({"rule": rule, "seconds": float(bench["s"].iloc[0]), "rss_mb": float(bench["max_rss"].iloc[0])})
+        rows.append({"rule": rule, **read_benchmark(path)})
     return pd.DataFrame(rows)
 
 

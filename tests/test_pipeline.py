@@ -17,7 +17,7 @@ from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.workflow import CHECKPOINT_DIR, FULL, HISTORY, MAIN, NETWORK, REFINED, Pipeline
+from refinenet.pipeline.workflow import CHECKPOINT_DIR, FULL, HISTORY, MAIN, NETWORK, REFINED, TIME_FILES, Pipeline
 from refinenet.pipeline.workflow import TABLES as EVALUATED
 
 pytestmark = pytest.mark.slow
@@ -66,13 +66,20 @@ def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
 
 
 def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by_snakemake):
-    """Two fresh runs, -j1 through DVC and -j2 through Snakemake: every report file is bit-identical."""
+    """Two fresh runs, -j1 through DVC and -j2 through Snakemake: every report file is bit-identical, but for the
+    timings of table_time (both runs made it, from their own jobs)."""
     reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
-    # csv, tex, per-cloud csv, metrics record of each table; the Kc sweep's plot; the architecture table's csv, tex
-    # and layers; paper_comparison's md and tex
-    assert len(reports) == 4 * len(TABLES) + 1 + 3 + 2
+    # csv, tex, per-cloud csv, metrics record of each table and of table_time; the Kc sweep's plot; the
+    # architecture table's csv, tex and layers; paper_comparison's md and tex
+    assert len(reports) == 4 * (len(TABLES) + 1) + 1 + 3 + 2
+    timed = set(map(Path, TIME_FILES.values()))
     for name in reports:
-        assert (by_dvc / name).read_bytes() == (by_snakemake / name).read_bytes(), name
+        if name in timed:
+            assert (by_dvc / name).is_file(), name
+        else:
+            assert (by_dvc / name).read_bytes() == (by_snakemake / name).read_bytes(), name
+    time_table = pd.read_csv(by_snakemake / TIME_FILES["csv"], index_col=0)
+    assert (time_table["s per 1k points"] > 0).all() and time_table.loc["network", "parameters per cluster"] > 0
     assert "Nothing to be done" in snakemake(by_dvc, "-n").stdout
     second = sh(by_dvc, "dvc", "repro").stdout
     assert "Data and pipelines are up to date" in second
@@ -88,6 +95,8 @@ TABLES = set(EVALUATED)
 REFINENET_TABLES = TABLES - {"table_baselines"}
 #: The release bundles the run's whole resolved params (full's: not the variants).
 RELEASE = {"release"}
+#: table_time names the data, MFPS's, the features', the network's and Kc's settings in its caption.
+TIME = {"table_time"}
 SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
 
 
@@ -101,13 +110,13 @@ def family(name: str) -> set[str]:
     [
         # PCA and Jet also start the Refine-Net of table_initial, which trains on their normals
         ("  jet_k: 100", "  jet_k: 90", family("baselines") | MAIN_TABLES | {"table_initial"} | RELEASE),
-        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE),
+        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE),
         ("seed: 2022", "seed: 7", SEEDED | RELEASE),
         ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",
-         {"clouds_train", "clouds_test", "paper_comparison"} | TABLES | RELEASE),
-        ("  hmp_k: 100", "  hmp_k: 90", family("features") | REFINENET_TABLES | RELEASE),
-        ("  n_clusters: 4", "  n_clusters: 3", family("clustering") | REFINENET_TABLES | RELEASE),
+         {"clouds_train", "clouds_test", "paper_comparison"} | TABLES | RELEASE | TIME),
+        ("  hmp_k: 100", "  hmp_k: 90", family("features") | REFINENET_TABLES | RELEASE | TIME),
+        ("  n_clusters: 4", "  n_clusters: 3", family("clustering") | REFINENET_TABLES | RELEASE | TIME),
         ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
         ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}", {"training_l1", "table_loss"}),

@@ -19,9 +19,9 @@ for step in PIPE.family("features"):
             tracked=tracked(step.name),
             variant=step.variant,
         log:
-            f"logs/features/{step.variant}/{{cloud}}.log",
+            wf.fill(wf.JOB_LOG, step=f"features/{step.variant}"),
         benchmark:
-            f"logs/features/{step.variant}/{{cloud}}.benchmark.tsv"
+            wf.fill(wf.JOB_BENCHMARK, step=f"features/{step.variant}"),
         threads: 1
         conda:
             "../envs/refinenet.yaml"

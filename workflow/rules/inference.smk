@@ -23,9 +23,9 @@ for step in PIPE.family("inference"):
             tracked=tracked(step.name),
             variant=step.variant,
         log:
-            f"logs/inference/{step.variant}/{{cloud}}.log",
+            wf.fill(wf.JOB_LOG, step=f"inference/{step.variant}"),
         benchmark:
-            f"logs/inference/{step.variant}/{{cloud}}.benchmark.tsv"
+            wf.fill(wf.JOB_BENCHMARK, step=f"inference/{step.variant}"),
         threads: 1
         resources:
             gpu=wf.gpus(PIPE.params[step.variant].inference.device),

@@ -18,9 +18,9 @@ for method in ("mfps", "simple_mfps"):
             tracked=tracked(method),
             method=method,
         log:
-            f"logs/{method}/{{cloud}}.log",
+            wf.fill(wf.JOB_LOG, step=method),
         benchmark:
-            f"logs/{method}/{{cloud}}.benchmark.tsv"
+            wf.fill(wf.JOB_BENCHMARK, step=method),
         threads: 1
         conda:
             "../envs/refinenet.yaml"

@@ -51,6 +51,13 @@ CHECKPOINT_DIR = "results/checkpoints/{variant}"
 RELEASE = "src/refinenet/shipped"
 TABLE_FILES = {"csv": "reports/{table}.csv", "tex": "reports/{table}.tex", "per_cloud": "reports/per_cloud/{table}.csv"}
 TABLE_METRICS = "reports/metrics/{table}.json"
+#: Each per-cloud job's log and Snakemake benchmark file (wall seconds, peak memory), by step: a method
+#: (`mfps`) or a per-variant family and its variant (`features/full`).
+JOB_LOG = "logs/{step}/{cloud}.log"
+JOB_BENCHMARK = "logs/{step}/{cloud}.benchmark.tsv"
+#: [P] Table time, from the job benchmark files (`pipeline.timing`): it differs from run to run.
+TIME_FILES = {"csv": "reports/table_time.csv", "tex": "reports/table_time.tex",
+              "per_cloud": "reports/per_cloud/table_time.csv", "metrics": "reports/metrics/table_time.json"}
 #: The line plot of a sweep table (e.g. the Kc sweep of fig:cluster).
 TABLE_PLOT = "reports/{table}.png"
 
@@ -446,6 +453,16 @@ class Pipeline:
                 keys=("data.source", "data.path", "data.n_points", "evaluation.protocol"),
                 deps=tuple(Table.files(name)["csv"] for name in TABLES), outs=tuple(COMPARISON_FILES.values()),
                 targets=lambda: list(COMPARISON_FILES.values()),
+            ),
+            Step(
+                name="table_time", family="time",
+                modules=("pipeline.timing", "network.summary", "network.model", *_TABLE, *_STAGE),
+                keys=("data.source", "data.path", "data.n_points", "mfps", "features", "clustering.n_clusters",
+                      "network", "patches", "inference.device"),
+                deps=("results/clouds/test", "results/normals/mfps/test", self._files("features", FULL, "test"),
+                      self._files("inference", FULL, "test")),
+                outs=tuple(path for kind, path in TIME_FILES.items() if kind != "metrics"),
+                metrics=(TIME_FILES["metrics"],), targets=lambda: list(TIME_FILES.values()),
             ),
             Step(
                 name="table_architecture", family="architecture",
