@@ -1,13 +1,12 @@
 """[P] Table time: seconds per 1k points of MFPS, the feature cache and the network (full's), from the run's job
 benchmark files, with the network's parameters per cluster and in total from the model definition."""
 
-from refinenet import config
 from refinenet.data.io import read_cloud
 from refinenet.network.model import architecture
 from refinenet.network.summary import parameters
 from refinenet.pipeline import stage
 from refinenet.pipeline.timing import job_rows, time_table, write_time_table
-from refinenet.pipeline.workflow import CLOUD, JOB_BENCHMARK, TIME_FILES, clouds, fill
+from refinenet.pipeline.workflow import CLOUD, JOB_BENCHMARK, TIME_FILES, clouds
 
 #: Quoted from the paper ([P] table:time), for the caption only.
 PAPER = "2.2 s per 1k points, 10.4M parameters"
@@ -20,10 +19,7 @@ def arguments(parser):
 def main(params, args):
     keys = [c.key for c in clouds(params, "test")]
     sizes = [(key, len(read_cloud(CLOUD.format(cloud=key)))) for key in keys]
-    benchmark = {"MFPS": fill(JOB_BENCHMARK, step="mfps"),
-                 "feature cache": fill(JOB_BENCHMARK, step=f"features/{config.FULL}"),
-                 "network": fill(JOB_BENCHMARK, step=f"inference/{config.FULL}")}
-    jobs = job_rows(sizes, benchmark)
+    jobs = job_rows(sizes, JOB_BENCHMARK)
     per_cluster = parameters({"full": architecture(params.network, params.features, params.patches)})["full"]
     table = time_table(jobs, per_cluster, params.clustering.n_clusters)
     caption = (f"Time per 1k points (each job's wall time over its cloud's points, process start included; CPU "

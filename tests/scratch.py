@@ -55,8 +55,8 @@ def report_files(repo: Path) -> dict[str, bytes]:
     """Every file under the copy's reports/, by path, with its bytes (table_time's files only as present: their
     timings differ from run to run)."""
     timed = set(TIME_FILES.values())
-    return {name: b"timings" if name in timed else p.read_bytes()
-            for p in sorted((repo / "reports").rglob("*")) if p.is_file() and (name := str(p.relative_to(repo)))}
+    files = {str(p.relative_to(repo)): p for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
+    return {name: b"timings" if name in timed else path.read_bytes() for name, path in files.items()}
 
 
 def different_files(expected: dict[str, bytes], got: dict[str, bytes]) -> list[str]:

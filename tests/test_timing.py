@@ -20,13 +20,11 @@ def _bench(path, seconds, rss=100.0):
 def test_seconds_per_1k_points_weigh_jobs_by_their_clouds(tmp_path):
     """Clouds of 1,000 and 3,000 points: MFPS 1 s and 5 s (6 s for 4k points: 1.5 s per 1k), features 2 s each
     (1.0), the network 4 s each (2.0); 4.5 s per 1k points in total; 4 clusters of 1,000 parameters."""
-    seconds = {"mfps": (1, 5), "features": (2, 2), "inference": (4, 4)}
+    seconds = {"mfps": (1, 5), "features/full": (2, 2), "inference/full": (4, 4)}
     for step, pair in seconds.items():
         for cloud, s in zip(("a", "b"), pair, strict=True):
             _bench(tmp_path / step / f"{cloud}.benchmark.tsv", s)
-    patterns = {"MFPS": "mfps", "feature cache": "features", "network": "inference"}
-    jobs = job_rows([("a", 1000), ("b", 3000)],
-                    {name: str(tmp_path / step / "{cloud}.benchmark.tsv") for name, step in patterns.items()})
+    jobs = job_rows([("a", 1000), ("b", 3000)], str(tmp_path / "{step}" / "{cloud}.benchmark.tsv"))
     assert len(jobs) == 6 and set(jobs["rss_mb"]) == {100.0}
     table = time_table(jobs, per_cluster=1000, n_clusters=4)
     assert table[PER_1K].to_dict() == pytest.approx({"MFPS": 1.5, "feature cache": 1.0, "network": 2.0, TOTAL: 4.5})

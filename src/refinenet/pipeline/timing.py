@@ -16,12 +16,16 @@ from pathlib import Path
 import pandas as pd
 
 from refinenet.atomic import atomic_path, write_text
+from refinenet.config import FULL
 from refinenet.errors import InputError
 from refinenet.evaluation.table import latex_escape
 
-#: The timed steps: row name -> step family (its jobs' benchmark files), in the order a cloud passes them.
-TIMED = {"MFPS": "mfps", "feature cache": "features", "network": "inference"}
+#: The timed steps, in the order a cloud passes them: row name -> the step of its jobs' benchmark files
+#: (`JOB_BENCHMARK`: MFPS, and full's instances of the per-variant steps).
+TIMED = {"MFPS": "mfps", "feature cache": f"features/{FULL}", "network": f"inference/{FULL}"}
 TOTAL = "Refine-Net in total"
+#: The rows that the network's parameters belong to.
+NETWORK_ROWS = ("network", TOTAL)
 PER_1K = "s per 1k points"
 
 
@@ -48,8 +52,8 @@ def time_table(jobs: pd.DataFrame, per_cluster: int, n_clusters: int) -> pd.Data
     table = pd.DataFrame(rows).set_index("step")
     table.loc[TOTAL] = [table[PER_1K].sum(), table["jobs"].sum()]
     table["jobs"] = table["jobs"].astype(int)
-    table["parameters per cluster"] = pd.array([None, None, per_cluster, per_cluster], dtype="Int64")
-    table["parameters"] = pd.array([None, None, per_cluster * n_clusters, per_cluster * n_clusters], dtype="Int64")
+    for column, count in (("parameters per cluster", per_cluster), ("parameters", per_cluster * n_clusters)):
+        table[column] = pd.array([count if step in NETWORK_ROWS else None for step in table.index], dtype="Int64")
     return table
 
 
@@ -77,9 +81,10 @@ def write_time_table(jobs: pd.DataFrame, table: pd.DataFrame, caption: str, labe
     write_text(paths["tex"], "\n".join(lines))
 
 
-def job_rows(clouds: Sequence[tuple[str, int]], benchmark: dict[str, str]) -> pd.DataFrame:
-    """Every timed job of the test clouds: (cloud key, points) pairs and, per timed step, the benchmark file
-    pattern with `{cloud}` open."""
+def job_rows(clouds: Sequence[tuple[str, int]], pattern: str) -> pd.DataFrame:
+    """Every timed job of the given (cloud key, points) pairs, from the benchmark files `pattern` names
+    (`{step}` and `{cloud}` open: `JOB_BENCHMARK`)."""
     rows = [{"cloud": key, "step": name, "points": points,
-             **read_benchmark(benchmark[name].format(cloud=key))} for key, points in clouds for name in TIMED]
+             **read_benchmark(pattern.format(step=step, cloud=key))}
+            for key, points in clouds for name, step in TIMED.items()]
     return pd.DataFrame(rows)
