@@ -73,12 +73,14 @@ def run(name: str, cores: str) -> int:
 
 
 def up_to_date_files() -> set[str]:
-    """The outputs that exist and that Snakemake would not rebuild (status `ok` in `snakemake --summary`)."""
+    """The outputs that exist and that Snakemake would not rebuild: status `ok` and plan `no update` in
+    `snakemake --summary` (a file can be `ok` itself and still be pending because an input of its job is missing,
+    e.g. a committed report whose upstream steps this run did not build)."""
     summary = subprocess.run([*SNAKEMAKE, "--summary", "--cores", "1"], env=_env(), capture_output=True, text=True)
     if summary.returncode != 0:
         return set()
     rows = [line.split("\t") for line in summary.stdout.splitlines()[1:]]
-    return {row[0] for row in rows if len(row) > 4 and row[4] == "ok" and Path(row[0]).exists()}
+    return {row[0] for row in rows if len(row) > 5 and row[4:6] == ["ok", "no update"] and Path(row[0]).exists()}
 
 
 def record() -> int:
