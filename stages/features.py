@@ -1,5 +1,7 @@
-"""Cache the network inputs of one cloud: multi-scale filtered normals, per-point frames and height maps."""
+"""Cache the network inputs of one cloud: multi-scale filtered normals, per-point frames and height maps, for the
+points the tables score (a PCPNet test shape's `.pidx` subset; every point otherwise)."""
 
+from refinenet.data.clouds import scored_points
 from refinenet.data.io import check_array, read_cloud, read_normals
 from refinenet.features.cache import compute_features, save_features
 from refinenet.pipeline import stage
@@ -15,7 +17,8 @@ def main(params, args):
     cloud = read_cloud(args.cloud)
     check_array(args.cloud, cloud.points, "points", params.features.hmp_k)
     initial = read_normals(args.initial, len(cloud))
-    features = compute_features(cloud.points, initial, params.features, progress=True)
+    features = compute_features(cloud.points, initial, params.features, progress=True,
+                                centres=scored_points(cloud.meta))
     save_features(args.out, features, {"cloud": args.cloud, "initial_normals": args.initial, **cloud.meta})
 
 

@@ -1,4 +1,7 @@
-"""Refine the normals of one test cloud with the per-cluster networks; write them in the PCPNet format."""
+"""Refine the normals of one test cloud with the per-cluster networks; write them in the PCPNet format. Points
+without features (not scored: outside a PCPNet shape's `.pidx`) get no network pass and NaN normals."""
+
+import numpy as np
 
 from refinenet.data.clouds import cloud_key
 from refinenet.data.io import write_normals
@@ -27,8 +30,10 @@ def main(params, args):
         raise InputError(args.clusters, f"{model.n_clusters} clusters, but {len(args.networks)} network folders")
     networks = load_networks(args.networks, network, device=params.inference.device)
     seed = derive_seed(params.seed, "refine", cloud_key(args.cloud, cloud))
-    normals = refine_normals(cloud.points, features, model, networks, params.patches, params.inference, seed=seed,
+    refined = refine_normals(cloud.points, features, model, networks, params.patches, params.inference, seed=seed,
                              progress=True)
+    normals = np.full((len(cloud), 3), np.nan, dtype=np.float32)
+    normals[features.points] = refined
     write_normals(args.out, normals)
 
 

@@ -1,6 +1,7 @@
 """[P] Table time: seconds per 1k points of MFPS, the feature cache and the network (full's), from the run's job
 benchmark files, with the network's parameters per cluster and in total from the model definition."""
 
+from refinenet.data.clouds import scored_points
 from refinenet.data.io import read_cloud
 from refinenet.network.model import architecture
 from refinenet.network.summary import parameters
@@ -16,13 +17,19 @@ def arguments(parser):
     pass
 
 
+def sizes(key):
+    """(key, points, scored points) of a test cloud."""
+    cloud = read_cloud(CLOUD.format(cloud=key))
+    scored = scored_points(cloud.meta)
+    return key, len(cloud), len(cloud) if scored is None else len(scored)
+
+
 def main(params, args):
     keys = [c.key for c in clouds(params, "test")]
-    sizes = [(key, len(read_cloud(CLOUD.format(cloud=key)))) for key in keys]
-    jobs = job_rows(sizes, JOB_BENCHMARK)
+    jobs = job_rows([sizes(key) for key in keys], JOB_BENCHMARK)
     per_cluster = parameters({"full": architecture(params.network, params.features, params.patches)})["full"]
     table = time_table(jobs, per_cluster, params.clustering.n_clusters)
-    caption = (f"Time per 1k points (each job's wall time over its cloud's points, process start included; CPU "
+    caption = (f"Time per 1k points (each job's wall time over the points it computed, process start included; CPU "
                f"MFPS and features, the network on inference.device = {params.inference.device}) and parameters "
                f"(Kc = {params.clustering.n_clusters} networks of the {params.network.preset} preset). Profile "
                f"{params.profile}; data: {params.data.source}, {len(keys)} test clouds of {params.data.n_points} "

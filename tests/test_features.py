@@ -10,9 +10,10 @@ import pytest
 from settings import feature_config
 
 import refinenet.features.cache as features_module
+from refinenet.data.io import save_record
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
-from refinenet.features.cache import compute_features, load_features, save_features
+from refinenet.features.cache import compute_features, load_features, load_for_cloud, save_features
 from refinenet.features.heightmaps import height_maps
 
 
@@ -74,6 +75,30 @@ def test_round_trip(tmp_path, cube):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(features, name))
         assert getattr(loaded, name).dtype == getattr(features, name).dtype
     assert [p.name for p in tmp_path.iterdir()] == [path.name]  # no temporary file left behind
+
+
+def test_scored_rows_equal_the_whole_clouds_and_keep_their_points(tmp_path, cube):
+    """A test cloud's scored points (a PCPNet .pidx) get the rows the whole cloud's features give them, and the
+    cache records which points they are; a cache of points the cloud lacks is refused."""
+    points, _, initial = cube
+    config = feature_config(hmp_k=20)
+    scored = np.arange(3, 300, 7)
+    whole = compute_features(points[:300], initial[:300], config)
+    some = compute_features(points[:300], initial[:300], config, centres=scored)
+    assert whole.centres is None and len(some) == len(scored)
+    np.testing.assert_array_equal(some.points, scored)
+    for name in ("nf", "frames", "heights"):
+        np.testing.assert_array_equal(getattr(some, name), getattr(whole, name)[scored])
+    np.testing.assert_array_equal(whole.rows(scored[:5]).points, scored[:5])
+    np.testing.assert_array_equal(some.rows(np.array([1, 2])).points, scored[1:3])
+    cloud = tmp_path / "cloud.npz"
+    save_record(cloud, {"points": points[:300], "normals": initial[:300]}, {})
+    save_features(tmp_path / "some.npz", some, {})
+    _, loaded = load_for_cloud(cloud, tmp_path / "some.npz")
+    np.testing.assert_array_equal(loaded.centres, scored)
+    save_record(cloud, {"points": points[:100], "normals": initial[:100]}, {})
+    with pytest.raises(InputError, match="some.npz: feature rows of points beyond the 100 of"):
+        load_for_cloud(cloud, tmp_path / "some.npz")
 
 
 def test_bad_cache_file_is_an_input_error(tmp_path):

@@ -69,6 +69,22 @@ def test_normals_files(tmp_path, cloud):
         read_normals(tmp_path / "n.npy", 49)
 
 
+def test_normals_of_some_rows_leave_the_others_unchecked(tmp_path, cloud):
+    """Points no estimator computed (outside a PCPNet .pidx) are NaN; reading the scored rows ignores them and
+    still refuses a NaN among the scored."""
+    _, normals = cloud
+    partial = np.where(np.arange(50)[:, None] % 2 == 0, normals, np.nan)
+    for name in ("n.npy", "n.normals"):
+        write_normals(tmp_path / name, partial)
+        np.testing.assert_allclose(read_normals(tmp_path / name, 50, np.arange(0, 50, 2)), normals[::2], atol=1e-6)
+        with pytest.raises(InputError, match="NaN"):
+            read_normals(tmp_path / name, 50, np.array([0, 1]))
+        with pytest.raises(InputError, match="NaN"):
+            read_normals(tmp_path / name, 50)
+        with pytest.raises(InputError, match="50 normals for 51 points"):
+            read_normals(tmp_path / name, 51, np.array([0]))
+
+
 @pytest.mark.parametrize(
     ("content", "problem"),
     [

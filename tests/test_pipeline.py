@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 import slurm_cluster
@@ -16,6 +17,11 @@ from kill_anywhere import kill_anywhere, passed
 from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
+from refinenet.data import shapes
+from refinenet.data.io import read_cloud, read_normals
+from refinenet.data.noise import add_gaussian_noise
+from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
 from refinenet.pipeline.workflow import CHECKPOINT_DIR, FULL, HISTORY, MAIN, NETWORK, REFINED, TIME_FILES, Pipeline
 from refinenet.pipeline.workflow import TABLES as EVALUATED
@@ -252,6 +258,61 @@ def test_the_real_scan_setting_x8_runs_end_to_end(tmp_path_factory):
     table = pd.read_csv(repo / TABLE, index_col=0)
     assert table.loc["Refine-Net"].notna().all()
     assert "X = 8" in (repo / "reports/table_synthetic.tex").read_text()
+
+
+def pcpnet_folder(folder: Path, n_points: int = 1000, scored: int = 100) -> dict[str, str]:
+    """A small PCPNet-format folder from the procedural shapes: one training shape, one test shape per column of
+    the paper's table (the noise columns at their sigma, the density ones clean), each with `.xyz`, `.normals` and a
+    `.pidx` of `scored` points, and the list files params.yaml names. Returns column (or train) -> shape."""
+    folder.mkdir()
+    names = [n for n, spec in shapes.catalogue().items() if spec.category == shapes.SHARP]
+    columns = {"None": 0.0, "0.00125": 0.125, "0.006": 0.6, "0.012": 1.2, "Gradient": 0.0, "Stripes": 0.0}
+    made = {**{column: (names[0], sigma) for column, sigma in columns.items()}, "train": (names[1], 0.6)}
+    lists = {column: (f"{name}_{column}", sigma) for column, (name, sigma) in made.items()}
+    rng = np.random.default_rng(0)
+    for i, (name, (shape, sigma)) in enumerate(zip([n for n, _ in made.values()], lists.values(), strict=True)):
+        points, normals = shapes.sample_shape(name, n_points, seed=i)
+        np.savetxt(folder / f"{shape}.xyz", add_gaussian_noise(points, sigma, seed=i), fmt="%.6f")
+        np.savetxt(folder / f"{shape}.normals", normals, fmt="%.6f")
+        np.savetxt(folder / f"{shape}.pidx", np.sort(rng.choice(n_points, scored, replace=False)), fmt="%d")
+    params = config.read_raw(REPO / "params.yaml")["data"]["pcpnet"]
+    for column, list_file in [("train", params["train_list"]), *params["test_lists"].items()]:
+        (folder / list_file).write_text(lists[column][0] + "\n")
+    return {column: shape for column, (shape, _) in lists.items()}
+
+
+def test_the_pcpnet_table_scores_and_computes_only_the_pidx_points(tmp_path_factory):
+    """table_pcpnet on a PCPNet-format folder: the paper's columns, each cell the RMSE on the shape's .pidx points;
+    features and the network only for those (the refined normals are NaN elsewhere), MFPS for every point."""
+    repo = smoke_copy(tmp_path_factory.mktemp("pcpnet"))
+    shapes_of = pcpnet_folder(repo.parent / "pcpnet_data")
+    set_param(repo, "  source: procedural", "  source: pcpnet")
+    set_param(repo, "  path: null", f"  path: {repo.parent / 'pcpnet_data'}")
+    snakemake(repo, "-j2", "reports/table_pcpnet.csv", "reports/table_time.csv")
+    table = pd.read_csv(repo / "reports/table_pcpnet.csv", index_col=0)
+    columns = ["None", "0.00125", "0.006", "0.012", "Gradient", "Stripes"]
+    assert list(table.columns) == [f"{c}/rmse" for c in [*columns, "Average"]]
+    assert list(table.index) == ["PCA", "Jet", "MFPS", "Refine-Net"] and table.notna().all().all()
+    np.testing.assert_allclose(table["Average/rmse"], table.iloc[:, :6].mean(axis=1), atol=1e-4)
+    for column in columns:
+        key = f"test/{column}/{shapes_of[column]}"
+        cloud = read_cloud(repo / f"results/clouds/{key}.npz")
+        pidx = np.asarray(cloud.meta["pidx"])
+        features, _ = load_features(repo / f"results/features/{FULL}/{key}.npz")
+        np.testing.assert_array_equal(features.centres, pidx)
+        refined = np.loadtxt(repo / REFINED.format(variant=FULL, cloud=key))
+        assert np.isfinite(refined[pidx]).all() and np.isnan(np.delete(refined, pidx, axis=0)).all()
+        assert np.isfinite(np.load(repo / f"results/normals/mfps/{key}.npy")).all()
+        for row, method in (("MFPS", "results/normals/mfps/{}.npy"), ("Refine-Net", REFINED.format(
+                variant=FULL, cloud="{}"))):
+            estimated = read_normals(repo / method.format(key), len(cloud), pidx)
+            rmse = np.sqrt(np.mean(unoriented_angles(estimated, cloud.normals[pidx]) ** 2))
+            assert table.loc[row, f"{column}/rmse"] == pytest.approx(rmse, abs=1e-4)
+    train, _ = load_features(repo / f"results/features/{FULL}/train/train/{shapes_of['train']}.npz")
+    assert train.centres is None and len(train) == 1000  # training uses every point
+    jobs = pd.read_csv(repo / TIME_FILES["per_cloud"])
+    assert set(jobs[jobs["step"] == "network"]["points"]) == {100}
+    assert set(jobs[jobs["step"] == "MFPS"]["points"]) == {1000}
 
 
 def test_runs_killed_anywhere_end_with_bit_identical_reports(by_snakemake, tmp_path):

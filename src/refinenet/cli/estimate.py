@@ -85,7 +85,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
         features = compute_features(sub, start, params.features, inner, length=length, centres=rows,
                                     workers=workers)
         normals[tile.own] = refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
-                                           inference, progress=inner, centres=rows, length=length)
+                                           inference, progress=inner, length=length)
     return normals
 
 

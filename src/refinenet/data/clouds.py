@@ -176,6 +176,13 @@ def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -
     return Cloud(add_gaussian_noise(clean, spec.noise, noise_seed), normals, meta)
 
 
+def scored_points(meta: dict[str, Any]) -> np.ndarray | None:
+    """The points of a cloud record that the tables score: a test cloud's `.pidx` subset (PCPNet's evaluation
+    points), else None for all. Only these need features and a network pass, so a PCPNet shape of 100k points
+    costs the network 5,000."""
+    return np.asarray(meta["pidx"], dtype=np.int64) if meta.get("split") == "test" and "pidx" in meta else None
+
+
 def _read_pidx(path: Path, n_points: int) -> list[int]:
     try:
         with warnings.catch_warnings():  # an empty file is reported below, not as a warning on stderr

@@ -355,8 +355,9 @@ def write_normals(path: str | Path, normals: np.ndarray) -> None:
             np.savetxt(tmp, np.asarray(normals, dtype=np.float64), fmt="%.8f")
 
 
-def read_normals(path: str | Path, n_points: int) -> np.ndarray:
-    """Normals written by `write_normals`, checked against the expected point count."""
+def read_normals(path: str | Path, n_points: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """Normals written by `write_normals`, checked against the expected point count. With `rows`, only those rows
+    are returned and checked: the others may be NaN, points no estimator computed (`data.clouds.scored_points`)."""
     path = Path(path)
     if path.suffix == ".npy":
         if not path.is_file():
@@ -364,7 +365,11 @@ def read_normals(path: str | Path, n_points: int) -> np.ndarray:
         normals = _load_npy(path)
     else:
         normals = _read_table(path, "normals")
-    return _check_normals(path, normals, n_points)
+    if rows is None:
+        return _check_normals(path, normals, n_points)
+    if normals.ndim != 2 or len(normals) != n_points:
+        raise InputError(path, f"{len(normals)} normals for {n_points} points")
+    return _check_normals(path, normals[rows], len(rows))
 
 
 def write_points(path: str | Path, points: np.ndarray, normals: np.ndarray) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 
 from refinenet.atomic import atomic_path, write_text
+from refinenet.data.clouds import scored_points
 from refinenet.data.io import read_cloud, read_normals
 from refinenet.data.shapes import TABLE_ORDER
 from refinenet.errors import InputError
@@ -29,19 +30,21 @@ METRIC_NAMES = {"mean": "mean", "rmse": "rmse", "pgp5": "PGP5", "pgp10": "PGP10"
 HIGHER_IS_BETTER = {"pgp5", "pgp10"}
 
 
-def evaluate(methods: Sequence[str], clouds: Sequence[str | Path], normals: dict[str, Sequence[str | Path]],
-             protocol: str) -> pd.DataFrame:
-    """Error statistics of every (method, cloud): `normals[method][i]` holds the estimate for `clouds[i]`."""
+def evaluate(methods: Sequence[str], clouds: Sequence[str | Path], normals: dict[str, Sequence[str | Path]]
+             ) -> pd.DataFrame:
+    """Error statistics of every (method, cloud) on the cloud's scored points (`scored_points`: the `.pidx`
+    subset where there is one): `normals[method][i]` holds the estimate for `clouds[i]`."""
     for method in methods:
         if len(normals[method]) != len(clouds):
             raise InputError(method, f"{len(normals[method])} normals files for {len(clouds)} clouds")
     rows = []
     for i, cloud_path in enumerate(clouds):
         cloud = read_cloud(cloud_path)
-        subset = np.asarray(cloud.meta["pidx"]) if protocol == "pcpnet" and "pidx" in cloud.meta else slice(None)
+        subset = scored_points(cloud.meta)
+        truth = cloud.normals if subset is None else cloud.normals[subset]
         for method in methods:
-            estimated = read_normals(normals[method][i], len(cloud))
-            stats = ErrorStats.from_angles(unoriented_angles(estimated[subset], cloud.normals[subset]))
+            estimated = read_normals(normals[method][i], len(cloud), subset)
+            stats = ErrorStats.from_angles(unoriented_angles(estimated, truth))
             rows.append(stats_row(method, cloud.meta["category"], cloud.meta["name"], stats))
     return pd.DataFrame(rows)
 

@@ -31,7 +31,8 @@ HEIGHT_STEP = 10_000
 
 @dataclass(frozen=True)
 class Features:
-    """One cloud's cached features, row i belonging to point i."""
+    """One cloud's cached features, row i belonging to point i, or to point centres[i] where the rows cover only
+    some points (a tile's own points; the scored points of a test cloud, `data.clouds.scored_points`)."""
 
     nf: np.ndarray
     """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them."""
@@ -39,14 +40,18 @@ class Features:
     """(N, 3, 3) float32: columns [e1 e2 e3] of the normal-tensor frame (§4)."""
     heights: np.ndarray
     """(N, X, m, m) float16 or float32: one height map per normal of nf, in nf's order."""
+    centres: np.ndarray | None = None
+    """(N,) the point of each row where the rows cover only some points; None: all, in order."""
     n_normals: int = field(init=False)
 
     def __post_init__(self) -> None:
         n, width = self.nf.shape
         object.__setattr__(self, "n_normals", width // 3)
-        if width % 3 or self.frames.shape != (n, 3, 3) or self.heights.shape[:2] != (n, width // 3):
+        if width % 3 or self.frames.shape != (n, 3, 3) or self.heights.shape[:2] != (n, width // 3) \
+                or (self.centres is not None and self.centres.shape != (n,)):
             raise ValueError(f"inconsistent feature shapes: nf {self.nf.shape}, frames {self.frames.shape}, "
-                             f"heights {self.heights.shape}")
+                             f"heights {self.heights.shape}"
+                             + ("" if self.centres is None else f", centres {self.centres.shape}"))
 
     def __len__(self) -> int:
         return len(self.nf)
@@ -55,6 +60,16 @@ class Features:
     def n_first(self) -> np.ndarray:
         """(N, 3) the first normal of nf: the initial normal when X = 9; the sign reference of frames and targets."""
         return self.nf[:, :3]
+
+    @property
+    def points(self) -> np.ndarray:
+        """(N,) the point of each row."""
+        return np.arange(len(self)) if self.centres is None else self.centres
+
+    def rows(self, index: np.ndarray) -> Features:
+        """The features of some rows, which keep the points they belong to."""
+        return Features(nf=self.nf[index], frames=self.frames[index], heights=self.heights[index],
+                        centres=self.points[index])
 
 
 def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig,
@@ -69,6 +84,7 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     """
     points = np.asarray(points, dtype=np.float64)
     length = bbox_diagonal(points) if length is None else length
+    given = centres
     centres = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
                           sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
@@ -85,19 +101,22 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for _ in tqdm(pool.map(fill, steps), total=len(steps), desc="height maps", disable=not progress):
             pass
-    return Features(nf=nf[centres], frames=frames[centres].astype(np.float32), heights=heights)
+    return Features(nf=nf[centres], frames=frames[centres].astype(np.float32), heights=heights,
+                    centres=None if given is None else centres)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
     """Write an uncompressed .npz atomically; `meta` (JSON-serialisable, e.g. the FeatureConfig) is stored with it."""
-    io.save_record(path, {"nf": features.nf, "frames": features.frames, "heights": features.heights}, meta)
+    arrays = {"nf": features.nf, "frames": features.frames, "heights": features.heights}
+    io.save_record(path, arrays if features.centres is None else {**arrays, "centres": features.centres}, meta)
 
 
 def load_features(path: str | Path) -> tuple[Features, dict[str, Any]]:
     """The features and meta written by `save_features`; InputError for a missing or malformed file."""
     arrays, meta = io.load_record(path, ("nf", "frames", "heights"), "feature cache")
     try:
-        features = Features(nf=arrays["nf"], frames=arrays["frames"], heights=arrays["heights"])
+        features = Features(nf=arrays["nf"], frames=arrays["frames"], heights=arrays["heights"],
+                            centres=arrays.get("centres"))
     except ValueError as err:
         raise InputError(path, str(err)) from None
     return features, meta
@@ -107,6 +126,9 @@ def load_for_cloud(cloud_path: str | Path, features_path: str | Path) -> tuple[i
     """A cloud record and its feature cache, checked to describe the same points."""
     cloud = io.read_cloud(cloud_path)
     features, _ = load_features(features_path)
-    if len(features) != len(cloud):
+    if features.centres is None and len(features) != len(cloud):
         raise InputError(features_path, f"{len(features)} feature rows for {len(cloud)} points of {cloud_path}")
+    if features.centres is not None and len(features) and not 0 <= features.centres.min() <= features.centres.max() \
+            < len(cloud):
+        raise InputError(features_path, f"feature rows of points beyond the {len(cloud)} of {cloud_path}")
     return cloud, features

@@ -26,14 +26,13 @@ from refinenet.network.training import BEST, EMPTY, network_fingerprint
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,
                    networks: Mapping[int, RefineNet], patch: PatchConfig, config: InferenceConfig, seed: int = 0,
-                   progress: bool = False, centres: np.ndarray | None = None,
-                   length: float | None = None) -> np.ndarray:
-    """(M, 3) float32 unit normals in the world frame, one per feature row.
+                   progress: bool = False, length: float | None = None) -> np.ndarray:
+    """(M, 3) float32 unit normals in the world frame, one per feature row (of the point `features.points` names).
 
     Each point goes through the network of its cluster (`networks` maps cluster id -> network, which is moved to
     `device` and put in eval mode); a cluster without a network (trained as empty) keeps the first normal of nf.
-    `patch` must match the training patches; `seed` draws the ball-mode subsets. `centres` are the points of the
-    feature rows (default: all, in order) and `length` the l_d of ball patches (`dataset.PreparedCloud`).
+    `patch` must match the training patches; `seed` draws the ball-mode subsets. `length` is the l_d of ball
+    patches (`dataset.PreparedCloud`).
     """
     device, batch_size = resolve_device(config.device), config.batch_size
     if batch_size < 1:
@@ -41,7 +40,7 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
     unknown = sorted(set(networks) - set(range(cluster_model.n_clusters)))
     if unknown:
         raise ValueError(f"networks for clusters {unknown}, but the cluster model has {cluster_model.n_clusters}")
-    cloud = prepare(points, features, cluster_model, centres=centres, length=length)
+    cloud = prepare(points, features, cluster_model, centres=features.centres, length=length)
     normals = features.n_first.astype(np.float32)
     rng = np.random.default_rng(seed)
     members = {c: np.flatnonzero(cloud.clusters == c) for c in sorted(networks)}

@@ -121,13 +121,11 @@ def half_precision_change(clouds: Sequence[tuple[np.ndarray, Features, np.ndarra
     rng = np.random.default_rng(seed)
     change, error32, error16 = [], [], []
     for points, features, truth in clouds:
-        rows = np.sort(rng.choice(len(features), min(sample, len(features)), replace=False))
-        subset = Features(nf=features.nf[rows], frames=features.frames[rows], heights=features.heights[rows])
-        a, b = (refine_normals(points, subset, cluster_model, nets, patch, config, centres=rows)
-                for nets in (networks, rounded))
+        subset = features.rows(np.sort(rng.choice(len(features), min(sample, len(features)), replace=False)))
+        a, b = (refine_normals(points, subset, cluster_model, nets, patch, config) for nets in (networks, rounded))
         change.append(unoriented_angles(a, b))
-        error32.append(unoriented_angles(a, truth[rows]))
-        error16.append(unoriented_angles(b, truth[rows]))
+        error32.append(unoriented_angles(a, truth[subset.points]))
+        error16.append(unoriented_angles(b, truth[subset.points]))
     change = np.concatenate(change)
     return {"points": int(len(change)), "mean_deg": float(change.mean()), "max_deg": float(change.max()),
             "error_float32_deg": float(np.concatenate(error32).mean()),

@@ -81,10 +81,11 @@ def write_time_table(jobs: pd.DataFrame, table: pd.DataFrame, caption: str, labe
     write_text(paths["tex"], "\n".join(lines))
 
 
-def job_rows(clouds: Sequence[tuple[str, int]], pattern: str) -> pd.DataFrame:
-    """Every timed job of the given (cloud key, points) pairs, from the benchmark files `pattern` names
-    (`{step}` and `{cloud}` open: `JOB_BENCHMARK`)."""
-    rows = [{"cloud": key, "step": name, "points": points,
+def job_rows(clouds: Sequence[tuple[str, int, int]], pattern: str) -> pd.DataFrame:
+    """Every timed job of the given (cloud key, points, scored points) triples, from the benchmark files `pattern`
+    names (`{step}` and `{cloud}` open: `JOB_BENCHMARK`). MFPS runs on every point; the feature cache and the
+    network only on the scored ones (`data.clouds.scored_points`)."""
+    rows = [{"cloud": key, "step": name, "points": points if step == TIMED["MFPS"] else scored,
              **read_benchmark(pattern.format(step=step, cloud=key))}
-            for key, points in clouds for name, step in TIMED.items()]
+            for key, points, scored in clouds for name, step in TIMED.items()]
     return pd.DataFrame(rows)

@@ -114,6 +114,8 @@ class Table:
     sweep: tuple[str, str] | None = None
     """(params key, symbol): the rows are variants that differ in this key; each is labelled and ordered by its
     value (the first of equal values kept), and the Average mean error is plotted against it."""
+    protocol: str | None = None
+    """How categories aggregate (`evaluation.protocol`'s values): fixed by the table, or None for the run's."""
 
     @staticmethod
     def files(name: str, table: Table | None = None) -> dict[str, str]:
@@ -154,6 +156,10 @@ TABLES = {
                            labels=((refinenet("pca_init"), "PCA + Refine-Net"),
                                    (refinenet("jet_init"), "Jet + Refine-Net"),
                                    (refinenet(FULL), "MFPS + Refine-Net"))),
+    "table_pcpnet": Table((*BASELINES, *MFPS_METHODS[:1], REFINENET), ("rmse",),
+                          "PCPNet benchmark: RMSE (degrees) on each shape's scored points (its .pidx subset), "
+                          "averaged over the shapes of a column",
+                          protocol="pcpnet"),
     "table_clusters": Table(tuple(refinenet(v) for v in (FULL, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
                             ("mean", "rmse"), "Number of clusters Kc: unoriented angular error (degrees)",
                             sweep=("clustering.n_clusters", "Kc")),
@@ -323,7 +329,7 @@ class Pipeline:
         params, methods = self.full, table.methods
         d, b, m = params.data, params.baselines, params.mfps
         parts = [
-            f"{table.title}, {params.evaluation.protocol} protocol.",
+            f"{table.title}, {self.protocol(table)} protocol.",
             f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
             + f", {d.n_points} points per cloud.",
         ]
@@ -346,6 +352,9 @@ class Pipeline:
         if changed:
             parts.append("Variants of Refine-Net (what each changes): " + "; ".join(changed) + ".")
         return " ".join(parts)
+
+    def protocol(self, table: Table) -> str:
+        return table.protocol or self.full.evaluation.protocol
 
     def changes(self, variant: str) -> dict[str, Any]:
         """The settings in which a variant differs from full, by dotted key."""
@@ -380,7 +389,7 @@ class Pipeline:
         keys = {family: keys for family, (keys, _) in VARIANT_STEPS.items()}
         made = {
             "features": lambda: Step(
-                name=name["features"], family="features", modules=(*_FEATURES, *_STAGE), keys=keys["features"],
+                name=name["features"], family="features", modules=(*_FEATURES, *_DATA, *_STAGE), keys=keys["features"],
                 deps=(*(f"results/clouds/{s}" for s in SPLITS),
                       *(os.path.dirname(self.initial_path(v, f"{s}/x")) for s in SPLITS)),
                 outs=tuple(files("features", v, s) for s in SPLITS), variant=v,
