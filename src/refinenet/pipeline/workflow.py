@@ -174,6 +174,13 @@ ARCHITECTURE_FILES = {"csv": "reports/table_architecture.csv", "tex": "reports/t
 
 COMPARISON_FILES = {"md": "reports/paper_comparison.md", "tex": "reports/paper_comparison.tex"}
 
+#: [P] fig:syn and fig:insight: normals as RGB and error heat maps of chosen test clouds (`evaluation.figures`),
+#: one column per method.
+FIGURE_NORMALS = {"png": "reports/figures/normals_and_errors.png", "pdf": "reports/figures/normals_and_errors.pdf"}
+FIGURE_METHODS = (*BASELINES, "mfps", REFINENET)
+#: The categories of the figure's clouds, as in fig:syn: a CAD shape with sharp edges and one with rich detail.
+FIGURE_CATEGORIES = ("SharpFeature", "RichFeature")
+
 
 #: The main job (`snakemake main`, scripts/run.sh): the synthetic benchmark's tables and the shipped release, within
 #: the default profile's budget. The ablation tables, each trained variant by variant, are built by the full run.
@@ -309,6 +316,15 @@ class Pipeline:
         if initial in config.INITIAL_ESTIMATORS:
             return self.normals_path(initial, cloud)
         return f"{initial}/{cloud}.normals"
+
+    def figure_keys(self) -> list[str]:
+        """The test clouds of the normals figure: the first of each FIGURE_CATEGORIES category, or (a source
+        without them) the first test cloud."""
+        first: dict[str, str] = {}
+        for c in self.clouds:
+            if c.split == "test":
+                first.setdefault(c.category, c.key)
+        return [first[c] for c in FIGURE_CATEGORIES if c in first] or [next(iter(first.values()))]
 
     def rows(self, table: Table) -> dict[str, str]:
         """The table's rows, method -> row name. A sweep table's rows are named and ordered by the swept value,
@@ -472,6 +488,15 @@ class Pipeline:
                       self._files("inference", FULL, "test")),
                 outs=tuple(path for kind, path in TIME_FILES.items() if kind != "metrics"),
                 metrics=(TIME_FILES["metrics"],), targets=lambda: list(TIME_FILES.values()),
+            ),
+            Step(
+                name="fig_normals", family="fig",
+                modules=("evaluation.figures", "evaluation.render", *_TABLE, *_STAGE),
+                keys=("data.source", "data.path", "data.n_points",
+                      *dict.fromkeys(b for m in FIGURE_METHODS for b in METHODS[m])),
+                deps=("results/clouds/test",
+                      *dict.fromkeys(os.path.dirname(self.normals_path(m, "test/x")) for m in FIGURE_METHODS)),
+                outs=tuple(FIGURE_NORMALS.values()), targets=lambda: list(FIGURE_NORMALS.values()),
             ),
             Step(
                 name="table_architecture", family="architecture",

@@ -1,0 +1,50 @@
+"""The point splat renderer and the normals figure: a nearer surface hides a farther one whatever the point order,
+normals colour by their axis whatever their sign, and the figure's files are the same bytes on every run."""
+
+import numpy as np
+
+from refinenet.evaluation.figures import Panel, normals_figure
+from refinenet.evaluation.render import normal_colours, splat, splat_radius, view_rotation
+
+RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+
+
+def grid_square(half: float, z: float, n: int = 60) -> np.ndarray:
+    u = np.linspace(-half, half, n)
+    x, y = np.meshgrid(u, u)
+    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, z)])
+
+
+def test_a_nearer_square_hides_the_one_behind_it():
+    """A red square at z = 1 in front of a smaller blue one at z = 0, seen along -z: no blue pixel, whichever
+    square's points come first; seen from behind, the blue square shows in the middle."""
+    front, back = grid_square(1.0, 1.0), grid_square(0.5, 0.0)
+    colours = np.vstack([np.tile(RED, (len(front), 1)), np.tile(BLUE, (len(back), 1))])
+    for order in (np.arange(len(colours)), np.arange(len(colours))[::-1]):
+        image = splat(np.vstack([front, back])[order], colours[order], np.eye(3), size=120)
+        assert not (image == BLUE).all(axis=2).any()
+        assert (image == RED).all(axis=2).sum() > 0.6 * 120 * 120  # the front square fills the view
+    behind = np.diag([-1.0, 1.0, -1.0])  # looking along +z: the blue square is nearer
+    image = splat(np.vstack([front, back]), colours, behind, size=120)
+    assert (image[60, 60] == BLUE).all() and (image[5 + 4, 60] == RED).all()
+
+
+def test_normal_colours_ignore_the_sign_and_follow_the_axis():
+    rotation = view_rotation()
+    up = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    np.testing.assert_array_equal(normal_colours(up, rotation), [[0.5, 0.5, 1.0], [0.5, 0.5, 1.0]])
+    assert splat_radius(100_000, 300) == 1 and splat_radius(1_000, 300) == 5 and splat_radius(3, 300) == 6
+
+
+def test_the_figure_is_the_same_bytes_on_every_run(tmp_path):
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(500, 3))
+    truth = points / np.linalg.norm(points, axis=1, keepdims=True)
+    noisy = truth + rng.normal(0.0, 0.1, truth.shape)
+    panel = Panel("test/sphere", points, truth, {"exact": truth, "noisy": noisy})
+    files = []
+    for run in range(2):
+        paths = {"png": tmp_path / f"{run}.png", "pdf": tmp_path / f"{run}.pdf"}
+        normals_figure([panel], "profile test", paths, size=80)
+        files.append([p.read_bytes() for p in paths.values()])
+    assert files[0] == files[1] and files[0][0].startswith(b"\x89PNG") and files[0][1].startswith(b"%PDF")
