@@ -76,8 +76,9 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     timings of table_time (both runs made it, from their own jobs)."""
     reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
     # csv, tex, per-cloud csv, metrics record of each table and of table_time; the Kc sweep's plot; the
-    # architecture table's csv, tex and layers; paper_comparison's md and tex; the normals figure's png and pdf
-    assert len(reports) == 4 * (len(TABLES) + 1) + 1 + 3 + 2 + 2
+    # architecture table's csv, tex and layers; paper_comparison's md and tex; the normals and clusters figures'
+    # png and pdf, and the training curves of every trained variant
+    assert len(reports) == 4 * (len(TABLES) + 1) + 1 + 3 + 2 + 2 * 2 + len(PIPELINE.trained)
     timed = set(map(Path, TIME_FILES.values()))
     for name in reports:
         if name in timed:
@@ -104,6 +105,9 @@ RELEASE = {"release"}
 #: table_time names the data, MFPS's, the features', the network's and Kc's settings in its caption.
 TIME = {"table_time"}
 SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
+#: The figures name the data in their footers; the normals figure shows the estimators' normals.
+FIGURES = {"fig_normals", "fig_clusters", "fig_training"}
+NORMALS_FIGURE = {"fig_normals"}
 
 
 def family(name: str) -> set[str]:
@@ -115,14 +119,17 @@ def family(name: str) -> set[str]:
     ("old", "new", "steps"),
     [
         # PCA and Jet also start the Refine-Net of table_initial, which trains on their normals
-        ("  jet_k: 100", "  jet_k: 90", family("baselines") | MAIN_TABLES | {"table_initial"} | RELEASE),
-        ("  theta_t: 60", "  theta_t: 45", {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME),
+        ("  jet_k: 100", "  jet_k: 90",
+         family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE),
+        ("  theta_t: 60", "  theta_t: 45",
+         {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE),
         ("seed: 2022", "seed: 7", SEEDED | RELEASE),
         ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",
-         {"clouds_train", "clouds_test", "paper_comparison"} | TABLES | RELEASE | TIME),
-        ("  hmp_k: 100", "  hmp_k: 90", family("features") | REFINENET_TABLES | RELEASE | TIME),
-        ("  n_clusters: 4", "  n_clusters: 3", family("clustering") | REFINENET_TABLES | RELEASE | TIME),
+         {"clouds_train", "clouds_test", "paper_comparison"} | TABLES | RELEASE | TIME | FIGURES),
+        ("  hmp_k: 100", "  hmp_k: 90", family("features") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE),
+        ("  n_clusters: 4", "  n_clusters: 3",
+         family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"}),
         ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
         ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}", {"training_l1", "table_loss"}),

@@ -2,8 +2,9 @@
 normals colour by their axis whatever their sign, and the figure's files are the same bytes on every run."""
 
 import numpy as np
+import pandas as pd
 
-from refinenet.evaluation.figures import Panel, normals_figure
+from refinenet.evaluation.figures import Panel, clusters_figure, normals_figure, training_figure
 from refinenet.evaluation.render import normal_colours, splat, splat_radius, view_rotation
 
 RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
@@ -48,3 +49,18 @@ def test_the_figure_is_the_same_bytes_on_every_run(tmp_path):
         normals_figure([panel], "profile test", paths, size=80)
         files.append([p.read_bytes() for p in paths.values()])
     assert files[0] == files[1] and files[0][0].startswith(b"\x89PNG") and files[0][1].startswith(b"%PDF")
+
+
+def test_the_cluster_and_training_figures_are_the_same_bytes_on_every_run(tmp_path):
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(300, 3))
+    labels = {"Kc = 2": (points[:, 0] > 0).astype(int), "Kc = 4": rng.integers(4, size=300)}
+    history = pd.DataFrame({"epoch": [1, 2, 3], "train_loss": [0.5, 0.3, 0.2], "val_mean_deg": [20.0, 15.0, 14.0]})
+    files = []
+    for run in range(2):
+        clusters = {"png": tmp_path / f"c{run}.png", "pdf": tmp_path / f"c{run}.pdf"}
+        clusters_figure(points, labels, ([1, 2, 4], [6.0, 5.0, 4.5]), "profile test", clusters, size=80)
+        training = {"png": tmp_path / f"t{run}.png"}
+        training_figure({0: history, 1: history.iloc[:0]}, "variant full", "profile test", training)
+        files.append([p.read_bytes() for p in (*clusters.values(), *training.values())])
+    assert files[0] == files[1]

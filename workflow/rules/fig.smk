@@ -20,4 +20,58 @@ rule fig_normals:
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.fig --clouds {input.clouds} 2>&1 | tee {log}"
+        "python -m stages.fig --figure normals --clouds {input.clouds} 2>&1 | tee {log}"
+
+
+# [P] fig:cluster: points coloured by cluster for Kc = 2 and Kc = 4, beside the Kc curve of table_clusters.
+
+
+rule fig_clusters:
+    message:
+        "fig_clusters: clusters and the Kc curve"
+    input:
+        code=PIPE.steps["fig_clusters"].code,
+        cloud=wf.CLOUD.format(cloud=PIPE.figure_keys()[0]),
+        features=files(wf.FULL, "features", wf.FEATURES, cloud=PIPE.figure_keys()[0]),
+        clusters=[files(v, "clustering", wf.CLUSTER_MODEL) for v in wf.CLUSTER_FIGURE_VARIANTS],
+        sweep=wf.Table.files("table_clusters")["csv"],
+    output:
+        **wf.FIGURE_CLUSTERS,
+    params:
+        tracked=tracked("fig_clusters"),
+    log:
+        "logs/fig/fig_clusters.log",
+    benchmark:
+        "logs/fig/fig_clusters.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
+    shell:
+        "python -m stages.fig --figure clusters --clouds {input.cloud} --features {input.features}"
+        " --clusters {input.clusters} --sweep {input.sweep} 2>&1 | tee {log}"
+
+
+# Training loss and validation error per epoch of every cluster, one figure per trained variant.
+
+
+rule fig_training:
+    message:
+        "fig_training: training curves"
+    input:
+        code=PIPE.steps["fig_training"].code,
+        histories=[
+            wf.HISTORY.format(variant=v, cluster=c)
+            for v in PIPE.trained
+            for c in range(PIPE.params[v].clustering.n_clusters)
+        ],
+    output:
+        [wf.FIGURE_TRAINING.format(variant=v) for v in PIPE.trained],
+    params:
+        tracked=tracked("fig_training"),
+    log:
+        "logs/fig/fig_training.log",
+    benchmark:
+        "logs/fig/fig_training.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
+    shell:
+        "python -m stages.fig --figure training 2>&1 | tee {log}"

@@ -1,7 +1,6 @@
-"""The paper's normal figures (fig:syn, fig:insight): per test cloud, a row of normals as RGB and a row of angular
-error heat maps, one column per method and the ground truth last, the mean error over each panel's points in its
-title. Rendered headless (`render.splat`, matplotlib's Agg) and deterministically: no timestamp or software
-version is written, so the same normals give the same PNG and PDF bytes."""
+"""The paper's figures: normals and error maps (fig:syn, fig:insight), clusters beside the Kc curve (fig:cluster)
+and the training curves. Rendered headless (`render.splat`, matplotlib's Agg) and deterministically: no timestamp
+or software version is written, so the same inputs give the same PNG and PDF bytes."""
 
 from __future__ import annotations
 
@@ -11,9 +10,11 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
+import pandas as pd
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from refinenet.atomic import atomic_path  # noqa: E402
 from refinenet.evaluation.metrics import unoriented_angles  # noqa: E402
@@ -37,7 +38,9 @@ class Panel:
 
 
 def normals_figure(panels: Sequence[Panel], footer: str, paths: Mapping[str, str | Path], size: int = 300) -> None:
-    """Write the figure to `paths` (keys png and pdf). `footer` names the profile and the data."""
+    """Per panel a row of normals as RGB and a row of angular-error heat maps, one column per method and the ground
+    truth last, the mean error over the panel's points in each title. Written to `paths` (kind -> file: png,
+    pdf); `footer` names the profile and the data, as in every figure."""
     rotation = view_rotation()
     methods = list(panels[0].estimates)
     rows, columns = 2 * len(panels), len(methods) + 1
@@ -63,9 +66,55 @@ def normals_figure(panels: Sequence[Panel], footer: str, paths: Mapping[str, str
         ax.set_xticks([])
         ax.set_yticks([])
         ax.set_frame_on(False)
-    fig.text(0.01, 0.005, footer, fontsize=5, color="0.35", wrap=True)
     fig.tight_layout(rect=(0, 0.03, 1, 1))
+    _save(fig, footer, paths)
+
+
+def _save(fig: plt.Figure, footer: str, paths: Mapping[str, str | Path]) -> None:
+    fig.text(0.01, 0.005, footer, fontsize=5, color="0.35", wrap=True)
     for kind, path in paths.items():
         with atomic_path(path) as tmp:
             fig.savefig(tmp, format=kind, metadata=STABLE[kind])
     plt.close(fig)
+
+
+def clusters_figure(points: np.ndarray, labels: Mapping[str, np.ndarray], sweep: tuple[Sequence[float],
+                    Sequence[float]], footer: str, paths: Mapping[str, str | Path], size: int = 300) -> None:
+    """[P] fig:cluster: the points of one cloud coloured by cluster under each clustering in `labels` (title ->
+    cluster id per point), beside the Kc curve `sweep` (Kc values, Average mean error)."""
+    rotation = view_rotation()
+    fig, axes = plt.subplots(1, len(labels) + 1, figsize=(2.6 * (len(labels) + 1), 3.1), dpi=150, squeeze=False)
+    palette = plt.get_cmap("tab10")
+    for ax, (title, ids) in zip(axes[0], labels.items(), strict=False):
+        ax.imshow(splat(points, palette(ids % 10)[:, :3], rotation, size))
+        ax.set_title(f"{title}: {len(np.unique(ids))} clusters used", fontsize=7)
+        ax.set_axis_off()
+    curve = axes[0, -1]
+    curve.plot(*sweep, marker="o", color="tab:blue")
+    curve.set_xlabel("Kc", fontsize=7)
+    curve.set_ylabel("Average mean error (deg)", fontsize=7)
+    curve.set_xticks(list(sweep[0]))
+    curve.tick_params(labelsize=6)
+    curve.grid(alpha=0.3)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.95))
+    _save(fig, footer, paths)
+
+
+def training_figure(histories: Mapping[int, pd.DataFrame], title: str, footer: str,
+                    paths: Mapping[str, str | Path]) -> None:
+    """Training loss and validation mean error per epoch, one line per cluster (`training.train_cluster`'s
+    history: epoch, train_loss, val_mean_deg)."""
+    fig, (loss, error) = plt.subplots(1, 2, figsize=(7.6, 2.8), dpi=150)
+    for c, history in histories.items():
+        loss.plot(history["epoch"], history["train_loss"], marker=".", label=f"cluster {c}")
+        error.plot(history["epoch"], history["val_mean_deg"], marker=".", label=f"cluster {c}")
+    for ax, label in ((loss, "training loss"), (error, "validation mean error (deg)")):
+        ax.set_xlabel("epoch", fontsize=7)
+        ax.set_ylabel(label, fontsize=7)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.tick_params(labelsize=6)
+        ax.grid(alpha=0.3)
+    error.legend(fontsize=6, loc="center left", bbox_to_anchor=(1.02, 0.5))
+    fig.suptitle(title, fontsize=8)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    _save(fig, footer, paths)

@@ -180,6 +180,13 @@ FIGURE_NORMALS = {"png": "reports/figures/normals_and_errors.png", "pdf": "repor
 FIGURE_METHODS = (*BASELINES, "mfps", REFINENET)
 #: The categories of the figure's clouds, as in fig:syn: a CAD shape with sharp edges and one with rich detail.
 FIGURE_CATEGORIES = ("SharpFeature", "RichFeature")
+#: [P] fig:cluster: the first figure cloud coloured by cluster for Kc = 2 (variant kc2) and Kc = 4 (full), beside
+#: the Kc curve of table_clusters.
+FIGURE_CLUSTERS = {"png": "reports/figures/clusters.png", "pdf": "reports/figures/clusters.pdf"}
+CLUSTER_FIGURE_VARIANTS = ("kc2", FULL)
+#: Training loss and validation error per epoch of every cluster, one figure per trained variant.
+FIGURE_TRAINING_DIR = "reports/figures/training"
+FIGURE_TRAINING = f"{FIGURE_TRAINING_DIR}/{{variant}}.png"
 
 
 #: The main job (`snakemake main`, scripts/run.sh): the synthetic benchmark's tables and the shipped release, within
@@ -229,6 +236,8 @@ _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model"
             "features.patches", "evaluation.metrics")
 _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipeline.workflow", "estimators.baselines",
           "estimators.mfps", *_DATA, *_GEOMETRY)
+#: The figure script's (one for the fig steps).
+_FIG = ("evaluation.figures", "evaluation.render", "network.clustering", *_FEATURES, *_TABLE, *_STAGE)
 
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
 _ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size", "network",
@@ -316,6 +325,11 @@ class Pipeline:
         if initial in config.INITIAL_ESTIMATORS:
             return self.normals_path(initial, cloud)
         return f"{initial}/{cloud}.normals"
+
+    @property
+    def trained(self) -> list[str]:
+        """The variants with networks of their own (full's first)."""
+        return [v for v in self.params if self.owner(v, "training") == v]
 
     def figure_keys(self) -> list[str]:
         """The test clouds of the normals figure: the first of each FIGURE_CATEGORIES category, or (a source
@@ -490,13 +504,28 @@ class Pipeline:
                 metrics=(TIME_FILES["metrics"],), targets=lambda: list(TIME_FILES.values()),
             ),
             Step(
-                name="fig_normals", family="fig",
-                modules=("evaluation.figures", "evaluation.render", *_TABLE, *_STAGE),
+                name="fig_normals", family="fig", modules=_FIG,
                 keys=("data.source", "data.path", "data.n_points",
                       *dict.fromkeys(b for m in FIGURE_METHODS for b in METHODS[m])),
                 deps=("results/clouds/test",
                       *dict.fromkeys(os.path.dirname(self.normals_path(m, "test/x")) for m in FIGURE_METHODS)),
                 outs=tuple(FIGURE_NORMALS.values()), targets=lambda: list(FIGURE_NORMALS.values()),
+            ),
+            Step(
+                name="fig_clusters", family="fig", modules=_FIG,
+                keys=("data.source", "data.path", "data.n_points", "clustering",
+                      *(f"variants.{v}" for v in CLUSTER_FIGURE_VARIANTS if _exists(self.raw, f"variants.{v}"))),
+                deps=("results/clouds/test", self._files("features", FULL, "test"),
+                      *dict.fromkeys(self._files("clustering", v, "") for v in CLUSTER_FIGURE_VARIANTS),
+                      Table.files("table_clusters")["csv"]),
+                outs=tuple(FIGURE_CLUSTERS.values()), targets=lambda: list(FIGURE_CLUSTERS.values()),
+            ),
+            Step(
+                name="fig_training", family="fig", modules=_FIG,
+                keys=("data.source", "data.path", "data.n_points"),
+                deps=tuple(HISTORY_DIR.format(variant=v) for v in self.trained),
+                outs=(FIGURE_TRAINING_DIR,),
+                targets=lambda: [FIGURE_TRAINING.format(variant=v) for v in self.trained],
             ),
             Step(
                 name="table_architecture", family="architecture",
