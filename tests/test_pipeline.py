@@ -257,16 +257,6 @@ def test_dvc_reruns_only_inference_after_an_inference_only_change(by_dvc):
     assert dvc_changed_stages(by_dvc) == set()
 
 
-def test_the_real_scan_setting_x8_runs_end_to_end(tmp_path_factory):
-    """features.include_initial false (X = 8, the real-scan setting): the network's input follows the features."""
-    repo = smoke_copy(tmp_path_factory.mktemp("x8"))
-    set_param(repo, "  include_initial: true", "  include_initial: false")
-    snakemake(repo, "-j2", "reports/table_synthetic.csv")
-    table = pd.read_csv(repo / TABLE, index_col=0)
-    assert table.loc["Refine-Net"].notna().all()
-    assert "X = 8" in (repo / "reports/table_synthetic.tex").read_text()
-
-
 def pcpnet_folder(folder: Path, n_points: int = 1000, scored: int = 100) -> dict[str, str]:
     """A small PCPNet-format folder from the procedural shapes: one training shape, one test shape per column of
     the paper's table (the noise columns at their sigma, the density ones clean), each with `.xyz`, `.normals` and a
@@ -290,12 +280,15 @@ def pcpnet_folder(folder: Path, n_points: int = 1000, scored: int = 100) -> dict
 
 def test_the_pcpnet_table_scores_and_computes_only_the_pidx_points(tmp_path_factory):
     """table_pcpnet on a PCPNet-format folder: the paper's columns, each cell the RMSE on the shape's .pidx points;
-    features and the network only for those (the refined normals are NaN elsewhere), MFPS for every point."""
+    features and the network only for those (the refined normals are NaN elsewhere), MFPS for every point. Run
+    with the real-scan setting X = 8 (features.include_initial false): the network's input follows the features."""
     repo = smoke_copy(tmp_path_factory.mktemp("pcpnet"))
     shapes_of = pcpnet_folder(repo.parent / "pcpnet_data")
     set_param(repo, "  source: procedural", "  source: pcpnet")
     set_param(repo, "  path: null", f"  path: {repo.parent / 'pcpnet_data'}")
+    set_param(repo, "  include_initial: true", "  include_initial: false")
     snakemake(repo, "-j2", "reports/table_pcpnet.csv", "reports/table_time.csv")
+    assert "X = 8" in (repo / "reports/table_pcpnet.tex").read_text()
     table = pd.read_csv(repo / "reports/table_pcpnet.csv", index_col=0)
     columns = ["None", "0.00125", "0.006", "0.012", "Gradient", "Stripes"]
     assert list(table.columns) == [f"{c}/rmse" for c in [*columns, "Average"]]
