@@ -6,7 +6,7 @@ compare every report file with an uninterrupted run's: they must be bit-identica
 The moments are spread over the length of the uninterrupted run. Two kills are aimed: the first one that finds a
 file being written (a `.NAME.*.tmp*` beside an output) and the first one that finds a training job past its first
 epoch (a checkpoint exists), so that the atomic writes and the training resumption are both exercised; the last
-kill waits for whichever of the two has not happened yet. A killed
+kills wait, one for each of the two that has not happened yet. A killed
 Snakemake leaves its lock behind: the restart runs `snakemake --unlock` first, as Snakemake's own message says. A
 killed `dvc repro` is simply run again (each DVC stage runs Snakemake without a lock of its own; DVC holds the
 repository's).
@@ -120,9 +120,9 @@ def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, refere
         hits = []
         for i in range(kills):
             delay = rng.uniform(0.6, 1.2) * length / kills
-            if i == kills - 1 and not (aims["write"] and aims["training"]):
-                delay = 3 * length  # the last kill waits for the aimed situation not met yet (DVC reruns a
-                                    # killed stage whole, so its timed kills may all fall before training)
+            if i >= kills - sum(not aims[aim] for aim in ("write", "training")):
+                delay = 5 * length  # the last kills wait, one for each aimed situation not met yet (DVC reruns
+                                    # a killed stage whole, so its timed kills may all fall before training)
             hit = kill_once(victim, tool, delay, aims, log)
             if hit is not None:
                 hits.append(hit)
