@@ -23,6 +23,7 @@ from refinenet.pipeline.workflow import (
     HISTORY,
     TABLES,
     Pipeline,
+    data_line,
 )
 
 
@@ -36,9 +37,7 @@ def arguments(parser):
 
 def main(params, args):
     pipe = Pipeline(config.read_raw(args.params), args.params)
-    d = params.data
-    footer = (f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
-              + f", {d.n_points} points per cloud.")
+    footer = data_line(params)
     if args.figure == "normals":
         normals(pipe, args.clouds, footer + f" Unoriented angular error, heat map clipped at {MAX_ERROR:g} deg; "
                 "orthographic view, azimuth 35, elevation 25 deg.")

@@ -84,25 +84,24 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     """
     points = np.asarray(points, dtype=np.float64)
     length = bbox_diagonal(points) if length is None else length
-    given = centres
-    centres = np.arange(len(points)) if centres is None else np.asarray(centres)
+    rows = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
                           sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
     frames = normal_frames(nf, config.frame_mode)
     tree = build_tree(points)
     extent = None if config.hmp_extent is None else config.hmp_extent * length
-    heights = np.empty((len(centres), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
+    heights = np.empty((len(rows), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
 
-    def fill(rows: slice) -> None:
-        heights[rows] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
-                                    tree=tree, index=centres[rows])
+    def fill(part: slice) -> None:
+        heights[part] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
+                                    tree=tree, index=rows[part])
 
-    steps = [slice(start, start + HEIGHT_STEP) for start in range(0, len(centres), HEIGHT_STEP)]
+    steps = [slice(start, start + HEIGHT_STEP) for start in range(0, len(rows), HEIGHT_STEP)]
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for _ in tqdm(pool.map(fill, steps), total=len(steps), desc="height maps", disable=not progress):
             pass
-    return Features(nf=nf[centres], frames=frames[centres].astype(np.float32), heights=heights,
-                    centres=None if given is None else centres)
+    return Features(nf=nf[rows], frames=frames[rows].astype(np.float32), heights=heights,
+                    centres=None if centres is None else rows)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:

@@ -75,12 +75,24 @@ def clouds(params: Params, split: str | None = None) -> list[CloudSpec]:
     return [c for c in list_clouds(params.data, params.noise) if split in (None, c.split)]
 
 
-def check_keys(params: Params) -> list[str]:
-    """One test cloud per category (the first): where the release measures what half precision changes."""
+def first_test_clouds(params: Params) -> dict[str, str]:
+    """The first test cloud of each category, category -> key."""
     first: dict[str, str] = {}
     for c in clouds(params, "test"):
         first.setdefault(c.category, c.key)
-    return list(first.values())
+    return first
+
+
+def check_keys(params: Params) -> list[str]:
+    """One test cloud per category (the first): where the release measures what half precision changes."""
+    return list(first_test_clouds(params).values())
+
+
+def data_line(params: Params) -> str:
+    """The profile and the data of a run, as table captions and figure footers name them."""
+    d = params.data
+    return (f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
+            + f", {d.n_points} points per cloud.")
 
 
 def gpus(device: str) -> int:
@@ -319,6 +331,10 @@ class Pipeline:
             return NORMALS.format(method=method, cloud=cloud)
         return REFINED.format(variant=self.owner(variant, "inference"), cloud=cloud)
 
+    def normals_dir(self, method: str, split: str = "test") -> str:
+        """The folder of a method's normals of one split (a step's dependency)."""
+        return os.path.dirname(self.normals_path(method, f"{split}/x"))
+
     def initial_path(self, variant: str, cloud: str) -> str:
         """The normals the features of `variant` start from, for the cloud with key `cloud`."""
         initial = self.params[variant].features.initial
@@ -334,10 +350,7 @@ class Pipeline:
     def figure_keys(self) -> list[str]:
         """The test clouds of the normals figure: the first of each FIGURE_CATEGORIES category, or (a source
         without them) the first test cloud."""
-        first: dict[str, str] = {}
-        for c in self.clouds:
-            if c.split == "test":
-                first.setdefault(c.category, c.key)
+        first = first_test_clouds(self.full)
         return [first[c] for c in FIGURE_CATEGORIES if c in first] or [next(iter(first.values()))]
 
     def rows(self, table: Table) -> dict[str, str]:
@@ -357,12 +370,8 @@ class Pipeline:
         """A table caption naming the profile, the data, the settings of every method in the table and what each
         variant changes."""
         params, methods = self.full, table.methods
-        d, b, m = params.data, params.baselines, params.mfps
-        parts = [
-            f"{table.title}, {self.protocol(table)} protocol.",
-            f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
-            + f", {d.n_points} points per cloud.",
-        ]
+        b, m = params.baselines, params.mfps
+        parts = [f"{table.title}, {self.protocol(table)} protocol.", data_line(params)]
         if set(BASELINES) & set(methods):
             parts.append(f"PCA/Jet K = {b.pca_k}/{b.jet_k} ({b.big_noise_k} for BigNoise), jet degree {b.jet_degree}.")
         if set(MFPS_METHODS) & set(methods):
@@ -449,10 +458,10 @@ class Pipeline:
         return [make() for family, make in made.items() if own[family] == v]
 
     def _table_step(self, name: str, table: Table) -> Step:
-        blocks = tuple(dict.fromkeys(b for m in table.methods for b in METHODS[REFINENET if variant_of(m) else m]))
+        blocks = _blocks(table.methods)
         variants = tuple(f"variants.{v}" for v in table.variants if v != FULL and _exists(self.raw, f"variants.{v}"))
         files = Table.files(name, table)
-        normals = dict.fromkeys(os.path.dirname(self.normals_path(m, "test/x")) for m in table.methods)
+        normals = dict.fromkeys(map(self.normals_dir, table.methods))
         return Step(
             name=name, family="table", modules=(*_TABLE, *_STAGE),
             keys=("data.source", "data.path", "data.n_points", "evaluation.protocol", *blocks, *variants),
@@ -506,9 +515,8 @@ class Pipeline:
             Step(
                 name="fig_normals", family="fig", modules=_FIG,
                 keys=("data.source", "data.path", "data.n_points",
-                      *dict.fromkeys(b for m in FIGURE_METHODS for b in METHODS[m])),
-                deps=("results/clouds/test",
-                      *dict.fromkeys(os.path.dirname(self.normals_path(m, "test/x")) for m in FIGURE_METHODS)),
+                      *_blocks(FIGURE_METHODS)),
+                deps=("results/clouds/test", *dict.fromkeys(map(self.normals_dir, FIGURE_METHODS))),
                 outs=tuple(FIGURE_NORMALS.values()), targets=lambda: list(FIGURE_NORMALS.values()),
             ),
             Step(
@@ -534,6 +542,11 @@ class Pipeline:
                 deps=(), outs=tuple(ARCHITECTURE_FILES.values()), targets=lambda: list(ARCHITECTURE_FILES.values()),
             ),
         ]
+
+
+def _blocks(methods: tuple[str, ...]) -> tuple[str, ...]:
+    """The params blocks that configure the given methods (a Refine-Net variant's as Refine-Net's)."""
+    return tuple(dict.fromkeys(b for m in methods for b in METHODS[REFINENET if variant_of(m) else m]))
 
 
 def _typed(variant: str, resolved: dict[str, Any], source: str) -> Params:
