@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 from settings import BASE
 
-from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud
+from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud, surface_sample
 from refinenet.data.io import write_ply
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError, ParamsError
+from refinenet.evaluation.denoise import surface_distance
 
 
 def data_block(**overrides):
@@ -97,3 +98,22 @@ def test_bad_source_settings(tmp_path):
         list_clouds(data_block(source="meshes", path=str(tmp_path / "nowhere")), BASE.noise)
     with pytest.raises(ParamsError, match="no test clouds"):
         list_clouds(data_block(source="points", path=str(tmp_path)), BASE.noise)
+
+
+def test_the_true_surface_of_a_noisy_cloud_lies_one_noise_sigma_away():
+    """Gaussian noise of sigma s moves a point off a (locally flat) surface by |N(0, s)|: mean s sqrt(2/pi). The
+    clean cloud lies on the dense sample's tangent planes, and a given cloud has no surface to measure against."""
+    spec = CloudSpec("test", "SharpFeature", "lblock_a_n0.20", "lblock_a", 0.20)
+    cloud = make_cloud(spec, 5000, seed=3)
+    surface, normals = surface_sample("c.npz", cloud.meta, 50_000)
+    assert surface.shape == (50_000, 3) and np.allclose(np.linalg.norm(normals, axis=1), 1)
+    sigma = cloud.meta["noise_sigma"]
+    assert surface_distance(cloud.points, surface, normals).mean() == pytest.approx(sigma * np.sqrt(2 / np.pi),
+                                                                                  rel=0.05)
+    clean = make_cloud(CloudSpec("test", "SharpFeature", "lblock_a_n0", "lblock_a", 0.0), 5000, seed=3)
+    on_surface = surface_distance(clean.points, surface, normals)
+    # exact on the flat faces; within a sample spacing of an edge the nearest sample may lie on the other face
+    spacing = np.sqrt(cloud.meta["l_d"] ** 2 / len(surface))
+    assert np.mean(on_surface < 1e-9) > 0.97 and on_surface.max() < 2 * spacing
+    with pytest.raises(InputError, match="given.npz: a given cloud has no known clean surface"):
+        surface_sample("given.npz", {"noise_percent": None}, 100)

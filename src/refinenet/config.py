@@ -371,6 +371,28 @@ class EvaluationConfig:
 
 
 @dataclass(frozen=True)
+class DenoiseConfig:
+    """params.yaml `denoise`: the point update of the denoising application (docs/algorithm.md §11) and the surface
+    reconstructed from its result. [P] gives lambda, gamma and the iterations, not sigma nor the ball radius. The
+    defaults are params.yaml's values: `refinenet denoise` uses them, and a release exported before this block
+    existed gets them."""
+
+    iterations: int = 20
+    lam: float = 0.5
+    """lambda: weight of the neighbours' own normal directions."""
+    sigma: float = 0.35
+    """Width of the normal similarity w(n_i, n_j) = exp(-|n_i - n_j|^2 / sigma^2). With sign-aligned unit normals
+    |n_i - n_j|^2 = 2 - 2|cos theta|: at 0.35, w = 0.5 at 17 deg and below 0.05 beyond 35 deg, so a neighbour across
+    a sharp edge hardly pulls a point off its own face."""
+    radius: float = 0.01
+    """Ball radius of the fixed neighbourhoods N_i, in l_d. The update shrinks curved surfaces by about
+    (1 - lambda) r^2 / 12 per unit curvature and step, so a small ball is better where the cloud is dense enough
+    (benchmarks/results/denoise_radius.md)."""
+    poisson_depth: int = 8
+    """Octree depth of the screened Poisson reconstruction (open3d)."""
+
+
+@dataclass(frozen=True)
 class Params:
     """Every setting of a run, one block per section of params.yaml (each documented in its dataclass)."""
 
@@ -388,6 +410,7 @@ class Params:
     training: TrainConfig
     inference: InferenceConfig
     evaluation: EvaluationConfig
+    denoise: DenoiseConfig
 
     @classmethod
     def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> Params:
@@ -395,11 +418,12 @@ class Params:
         size) is reported under its block's key."""
         blocks = {"data": DataConfig, "baselines": BaselineConfig, "mfps": MFPSConfig, "features": FeatureConfig,
                   "clustering": ClusteringConfig, "network": NetworkParams, "patches": PatchConfig,
-                  "training": TrainConfig, "inference": InferenceConfig, "evaluation": EvaluationConfig}
+                  "training": TrainConfig, "inference": InferenceConfig, "evaluation": EvaluationConfig,
+                  "denoise": DenoiseConfig}
         typed: dict[str, Any] = {}
         for key, block in blocks.items():
             try:
-                typed[key] = block(**params[key])
+                typed[key] = block(**params.get(key, {}))
             except (TypeError, ValueError) as err:
                 raise ParamsError(key, str(err), source) from None
         noise = params["noise"]
@@ -500,6 +524,13 @@ def validate(params: dict[str, Any], source: str = "params.yaml") -> None:
         err = errors[0]
         key = ".".join(str(p) for p in err.path) or "(top level)"
         raise ParamsError(key, err.message, source)
+
+
+def validate_block(block: str, values: dict[str, Any], source: str) -> None:
+    """Check one block's values (e.g. given on a command line) against its part of the JSON schema."""
+    schema = yaml.safe_load(SCHEMA.read_text())["properties"][block]
+    for err in sorted(jsonschema.Draft202012Validator(schema).iter_errors(values), key=lambda e: list(e.path))[:1]:
+        raise ParamsError(".".join([block, *map(str, err.path)]), err.message, source)
 
 
 def read_raw(path: str | Path = "params.yaml") -> dict[str, Any]:

@@ -164,16 +164,28 @@ def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -
         meta.update(noise_percent=None, l_d=bbox_diagonal(cloud.points))
         return Cloud(cloud.points, cloud.normals, meta)
     sample_seed = derive_seed(seed, "sample", spec.origin)
-    if spec.origin in shapes.catalogue():
-        clean, normals = shapes.sample_shape(spec.origin, n_points, sample_seed)
-    else:
-        vertices, faces = read_mesh(spec.origin)
-        clean, normals = sample_mesh(vertices, faces, n_points, np.random.default_rng(sample_seed))
+    clean, normals = _sample(spec.origin, n_points, sample_seed)
     noise_seed = derive_seed(seed, "noise", spec.key)
     l_d = bbox_diagonal(clean)
     meta.update(noise_percent=spec.noise, noise_sigma=spec.noise / 100 * l_d, l_d=l_d,
                 sample_seed=sample_seed, noise_seed=noise_seed, n_points=n_points)
     return Cloud(add_gaussian_noise(clean, spec.noise, noise_seed), normals, meta)
+
+
+def surface_sample(path: str | Path, meta: dict[str, Any], n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """A fresh, dense sample of the clean surface a cloud record was made from (points and true normals), where
+    distances to the true surface are measured; only a synthesised cloud (a procedural shape or a mesh) has one."""
+    if meta.get("noise_percent") is None:
+        raise InputError(path, "a given cloud has no known clean surface (only procedural or mesh clouds have one)")
+    return _sample(meta["origin"], n_points, derive_seed(meta["sample_seed"], "surface"))
+
+
+def _sample(origin: str, n_points: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points uniform by area on a catalogued shape or a mesh file, with their true normals."""
+    if origin in shapes.catalogue():
+        return shapes.sample_shape(origin, n_points, seed)
+    vertices, faces = read_mesh(origin)
+    return sample_mesh(vertices, faces, n_points, np.random.default_rng(seed))
 
 
 def scored_points(meta: dict[str, Any]) -> np.ndarray | None:
