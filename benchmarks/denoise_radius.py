@@ -47,9 +47,9 @@ def main() -> None:
             cloud = make_cloud(CloudSpec("test", "bench", origin, origin, noise), n, seed=2022)
             surface, normals = surface_sample("bench", cloud.meta, SURFACE_SAMPLES * n)
             l_d = cloud.meta["l_d"]
-
-            def distance(points):
+            def distance(points, surface=surface, normals=normals, l_d=l_d):
                 return 1e3 * surface_distance(points, surface, normals).mean() / l_d
+
             pca = pca_normals(cloud.points, min(100, n // 10))
             cells = []
             for r in RADII:

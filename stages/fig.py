@@ -2,21 +2,42 @@
 * normals (fig:syn / fig:insight): normals of PCA, Jet, MFPS and Refine-Net as RGB and their angular errors as heat
   maps on chosen test clouds (a PCPNet shape's scored points only: the network computed no others);
 * clusters (fig:cluster): a test cloud coloured by cluster for Kc = 2 and Kc = 4, beside the Kc curve;
-* training: training loss and validation error per epoch of every cluster, one figure per trained variant."""
+* loss (fig:loss2): one shape at increasing noise, each point blue where the L1 network has the lower error, red
+  where the L2 one has;
+* training: training loss and validation error per epoch of every cluster, one figure per trained variant;
+* denoise (fig:block): one test cloud's points after denoising with each method's normals, coloured by their
+  distance to the true surface, and the screened Poisson surface of each (normals oriented by `orient_mst`), beside
+  the noisy input and the true surface."""
 
+import numpy as np
 import pandas as pd
 
 from refinenet import config
-from refinenet.data.clouds import cloud_key, scored_points
+from refinenet.data.clouds import cloud_key, scored_points, surface_sample
 from refinenet.data.io import read_cloud, read_normals
-from refinenet.evaluation.figures import MAX_ERROR, Panel, clusters_figure, normals_figure, training_figure
+from refinenet.evaluation.denoise import poisson_surface, read_record
+from refinenet.evaluation.figures import (
+    MAX_ERROR,
+    DenoisedColumn,
+    Panel,
+    clusters_figure,
+    denoising_figure,
+    loss_figure,
+    normals_figure,
+    training_figure,
+)
 from refinenet.evaluation.table import METHOD_NAMES
 from refinenet.features.cache import load_for_cloud
+from refinenet.geometry.orientation import orient_mst
 from refinenet.network.clustering import cloud_clusters, load_cluster_model
 from refinenet.pipeline import stage
 from refinenet.pipeline.workflow import (
     CLUSTER_FIGURE_VARIANTS,
+    DENOISE_INPUT,
+    DENOISE_METHODS,
     FIGURE_CLUSTERS,
+    FIGURE_DENOISE,
+    FIGURE_LOSS,
     FIGURE_METHODS,
     FIGURE_NORMALS,
     FIGURE_TRAINING,
@@ -28,21 +49,28 @@ from refinenet.pipeline.workflow import (
 
 
 def arguments(parser):
-    parser.add_argument("--figure", required=True, choices=("normals", "clusters", "training"))
+    parser.add_argument("--figure", required=True, choices=("normals", "clusters", "training", "denoise", "loss"))
     parser.add_argument("--clouds", nargs="+", default=[], help="the figure's test cloud records (.npz)")
     parser.add_argument("--features", help="clusters: the cloud's feature cache (full's)")
     parser.add_argument("--clusters", nargs="+", default=[], help="clusters: the cluster model of each Kc shown")
     parser.add_argument("--sweep", help="clusters: table_clusters' CSV")
+    parser.add_argument("--records", nargs="+", default=[], help="denoise: the cloud's denoising record")
 
 
 def main(params, args):
     pipe = Pipeline(config.read_raw(args.params), args.params)
     footer = data_line(params)
     if args.figure == "normals":
-        normals(pipe, args.clouds, footer + f" Unoriented angular error, heat map clipped at {MAX_ERROR:g} deg; "
-                "orthographic view, azimuth 35, elevation 25 deg.")
+        normals_figure(panels(pipe, args.clouds, {m: METHOD_NAMES[m] for m in FIGURE_METHODS}),
+                       footer + f" Unoriented angular error, heat map clipped at {MAX_ERROR:g} deg; "
+                       "orthographic view, azimuth 35, elevation 25 deg.", FIGURE_NORMALS)
+    elif args.figure == "loss":
+        loss_figure(panels(pipe, args.clouds, pipe.rows(TABLES["table_loss"])),
+                    footer + " Unoriented angular error of each point under each network.", FIGURE_LOSS)
     elif args.figure == "clusters":
         clusters(pipe, args.clouds[0], args.features, args.clusters, args.sweep, footer)
+    elif args.figure == "denoise":
+        denoise(params.denoise, args.clouds[0], args.records[0], footer)
     else:
         for v in pipe.trained:
             n = pipe.params[v].clustering.n_clusters
@@ -51,16 +79,17 @@ def main(params, args):
                             {"png": FIGURE_TRAINING.format(variant=v)})
 
 
-def normals(pipe, clouds, footer):
-    panels = []
+def panels(pipe, clouds, methods):
+    """One panel per test cloud: its scored points (a PCPNet shape's `.pidx` points: the network computed no
+    others), its true normals and the normals of each method, by the name `methods` gives it."""
+    made = []
     for path in clouds:
         cloud = read_cloud(path)
         key, scored = cloud_key(path, cloud), scored_points(cloud.meta)
         rows = slice(None) if scored is None else scored
-        estimates = {METHOD_NAMES[m]: read_normals(pipe.normals_path(m, key), len(cloud), scored)
-                     for m in FIGURE_METHODS}
-        panels.append(Panel(key.removeprefix("test/"), cloud.points[rows], cloud.normals[rows], estimates))
-    normals_figure(panels, footer, FIGURE_NORMALS)
+        estimates = {name: read_normals(pipe.normals_path(m, key), len(cloud), scored) for m, name in methods.items()}
+        made.append(Panel(key.removeprefix("test/"), cloud.points[rows], cloud.normals[rows], estimates))
+    return made
 
 
 def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
@@ -76,6 +105,23 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
     clusters_figure(cloud.points[features.points], labels,
                     ([pipe.swept(m, key) for m in rows], [float(errors[label]) for label in rows.values()]),
                     footer + f" Cloud {cloud_key(cloud_path, cloud)}.", FIGURE_CLUSTERS)
+
+
+
+def denoise(config, cloud_path, record_path, footer):
+    cloud, record = read_cloud(cloud_path), read_record(record_path)
+    surface, surface_normals = surface_sample(cloud_path, cloud.meta, len(cloud))
+    columns = [DenoisedColumn("noisy input / true surface", cloud.points, record["distance"][DENOISE_INPUT],
+                              poisson_surface(surface, surface_normals, config.poisson_depth))]
+    for method in DENOISE_METHODS:
+        points = record["points"][method].astype(np.float64)
+        oriented = orient_mst(points, record["normals"][method].astype(np.float64))
+        columns.append(DenoisedColumn(METHOD_NAMES[method], points, record["distance"][method],
+                                      poisson_surface(points, oriented, config.poisson_depth)))
+    clip = 2 * cloud.meta["noise_sigma"] / cloud.meta["l_d"]
+    denoising_figure(columns, clip, footer + f" Cloud {cloud_key(cloud_path, cloud)}; {config.iterations} updates, "
+                     f"lambda {config.lam}, sigma {config.sigma}, radius {config.radius} l_d; distance heat map "
+                     f"clipped at 2 noise sigma; Poisson depth {config.poisson_depth}.", FIGURE_DENOISE)
 
 
 if __name__ == "__main__":

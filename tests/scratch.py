@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from refinenet.pipeline.workflow import TIME_FILES
+from refinenet.pipeline.workflow import TIMED_FILES
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -54,7 +54,7 @@ def smoke_copy(tmp: Path) -> Path:
 def report_files(repo: Path) -> dict[str, bytes]:
     """Every file under the copy's reports/, by path, with its bytes (table_time's files only as present: their
     timings differ from run to run)."""
-    timed = set(TIME_FILES.values())
+    timed = set(TIMED_FILES)
     files = {str(p.relative_to(repo)): p for p in sorted((repo / "reports").rglob("*")) if p.is_file()}
     return {name: b"timings" if name in timed else path.read_bytes() for name, path in files.items()}
 

@@ -198,3 +198,52 @@ def test_too_few_points_names_the_neighbourhood(tmp_path):
     np.savetxt(source, terrain(150))
     run = cli("normals", source, "-o", tmp_path / "out.ply")
     assert run.returncode == 2 and "small.xyz" in run.stderr and "225" in run.stderr, run.stderr
+
+
+# ----------------------------------------------------------------------------------------------------- denoise
+
+
+def test_denoise_moves_a_noisy_sphere_onto_its_surface_and_writes_the_surface(tmp_path):
+    """A unit sphere with 0.2% radial-ish Gaussian noise and exact outward normals (40k points): the mean distance
+    to the sphere drops at least 3x, and the Poisson surface of the result lies on the sphere."""
+    points, normals = sample_shape("sphere_a", 40_000, seed=77)
+    centre = points.mean(axis=0)
+    radius = np.linalg.norm(points - centre, axis=1).mean()
+    noisy = add_gaussian_noise(points, 0.2, seed=3)
+    cloud = tmp_path / "noisy.npy"
+    np.save(cloud, np.c_[noisy, normals])
+    run = cli("denoise", cloud, "-o", tmp_path / "out.ply", "--surface", tmp_path / "surface.ply")
+    assert run.returncode == 0, run.stderr
+    out = read_cloud(tmp_path / "out.ply")
+    before, after = (np.abs(np.linalg.norm(p - centre, axis=1) - radius).mean() for p in (noisy, out.points))
+    assert after < before / 3, (before, after)
+    np.testing.assert_allclose(out.normals, normals, atol=1e-6)  # the normals are kept
+    import open3d as o3d
+
+    vertices = np.asarray(o3d.io.read_triangle_mesh(str(tmp_path / "surface.ply")).vertices)
+    assert len(vertices) > 1000
+    assert np.median(np.abs(np.linalg.norm(vertices - centre, axis=1) - radius)) < before
+
+
+@pytest.mark.parametrize(
+    ("args", "problem"),
+    [
+        (("--radius", "0"), "command line: denoise.radius: 0.0 is less than or equal to the minimum of 0"),
+        (("--surface", "mesh.stl"), "mesh.stl: unsupported surface type"),
+        (("--normals", "missing.normals"), "missing.normals"),
+    ],
+)
+def test_denoise_bad_arguments_fail_in_one_line_and_write_nothing(tmp_path, args, problem):
+    points, normals = sample_shape("sphere_a", 500, seed=1)
+    cloud = tmp_path / "c.npy"
+    np.save(cloud, np.c_[points, normals])
+    run = cli("denoise", cloud, "-o", tmp_path / "out.ply", *args)
+    assert run.returncode == 2 and problem in run.stderr and run.stderr.count("\n") == 1, run.stderr
+    assert not (tmp_path / "out.ply").exists()
+
+
+def test_denoise_without_normals_says_how_to_get_them(tmp_path):
+    cloud = tmp_path / "bare.xyz"
+    np.savetxt(cloud, sample_shape("sphere_a", 500, seed=1)[0])
+    run = cli("denoise", cloud, "-o", tmp_path / "out.ply")
+    assert run.returncode == 2 and "has no normals: give them with --normals" in run.stderr

@@ -4,6 +4,7 @@ outputs (so nothing a step made is pruned, and DVC caches it), and the real-scan
 so marked slow."""
 
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -13,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import slurm_cluster
+from browser import open_page
 from kill_anywhere import kill_anywhere, passed
 from scratch import isolated, set_param, sh, smoke_copy, snakemake
 
@@ -23,7 +25,20 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.workflow import CHECKPOINT_DIR, FULL, HISTORY, MAIN, NETWORK, REFINED, TIME_FILES, Pipeline
+from refinenet.pipeline.workflow import (
+    CHECKPOINT_DIR,
+    DENOISE_TABLE,
+    FULL,
+    HISTORY,
+    MAIN,
+    NETWORK,
+    REFINED,
+    REPORT_FILES,
+    TABLES_PDF,
+    TIME_FILES,
+    TIMED_FILES,
+    Pipeline,
+)
 from refinenet.pipeline.workflow import TABLES as EVALUATED
 
 pytestmark = pytest.mark.slow
@@ -46,9 +61,10 @@ def by_snakemake(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def by_dvc(tmp_path_factory):
-    """The same pipeline through DVC: a second fresh run, stage by stage (another job order than Snakemake's)."""
+    """The same pipeline through DVC: a second fresh run, stage by stage (another job order than Snakemake's);
+    without a program a step needs (pdflatex), every other stage, as Snakemake's default target does."""
     repo = smoke_copy(tmp_path_factory.mktemp("dvc"))
-    sh(repo, "dvc", "repro", env={"REFINENET_CORES": "2"})
+    sh(repo, "dvc", "repro", *(sorted(STEPS - UNINSTALLED) if UNINSTALLED else []), env={"REFINENET_CORES": "2"})
     return repo
 
 
@@ -67,19 +83,21 @@ def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
     # MFPS is built for sharp features: it must beat both baselines there (docs/algorithm.md §2).
     assert table.loc["MFPS", "SharpFeature/mean"] < min(table.loc["PCA", "SharpFeature/mean"],
                                                          table.loc["Jet", "SharpFeature/mean"])
-    assert dvc_changed_stages(by_snakemake) == set()
-    assert "didn't change" in sh(by_snakemake, "dvc", "repro").stdout
+    assert dvc_changed_stages(by_snakemake) == UNINSTALLED
+    if not UNINSTALLED:
+        assert "didn't change" in sh(by_snakemake, "dvc", "repro").stdout
 
 
 def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by_snakemake):
     """Two fresh runs, -j1 through DVC and -j2 through Snakemake: every report file is bit-identical, but for the
-    timings of table_time (both runs made it, from their own jobs)."""
+    timings of table_time and the reports that include it (both runs made them, from their own jobs)."""
     reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
-    # csv, tex, per-cloud csv, metrics record of each table and of table_time; the Kc sweep's plot; the
-    # architecture table's csv, tex and layers; paper_comparison's md and tex; the normals and clusters figures'
-    # png and pdf, and the training curves of every trained variant
-    assert len(reports) == 4 * (len(TABLES) + 1) + 1 + 3 + 2 + 2 * 2 + len(PIPELINE.trained)
-    timed = set(map(Path, TIME_FILES.values()))
+    # csv, tex, per-cloud csv, metrics record of each table, of table_denoise and of table_time; the Kc sweep's
+    # plot; the architecture table's csv, tex and layers; paper_comparison's md and tex; the normals, clusters,
+    # denoising and L1/L2 figures' png and pdf, and the training curves of every trained variant; the page, the LaTeX
+    # of every table and its PDF
+    assert len(reports) == 4 * (len(TABLES) + 2) + 1 + 3 + 2 + 2 * 4 + len(PIPELINE.trained) + 3
+    timed = set(map(Path, TIMED_FILES))
     for name in reports:
         if name in timed:
             assert (by_dvc / name).is_file(), name
@@ -93,8 +111,34 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     assert "Running stage" not in second
 
 
+def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake):
+    """reports/index.html opened from the file system in headless Chromium: every figure loads, every table of the
+    run is there with rows, and the tables' LaTeX compiled into one PDF."""
+    tables, figures = PIPELINE.reported()
+    page = open_page(by_snakemake / REPORT_FILES["html"])
+    assert page.images == {f.png: "yes" for f in figures}
+    assert page.body.get("data-missing-images") == "0"
+    assert len(page.tables) == len(tables) and min(page.tables) >= 1
+    if shutil.which("pdflatex"):
+        assert (by_snakemake / TABLES_PDF).read_bytes().startswith(b"%PDF")
+
+
+def test_denoising_moves_points_and_measures_the_noisy_input_at_its_noise_level(by_snakemake):
+    """The noisy input lies |N(0, s)| from its true surface: a mean of s sqrt(2/pi), s = noise % of l_d (in the
+    table's 10^-3 l_d). Each method's row is measured on the same clouds."""
+    table = pd.read_csv(by_snakemake / f"reports/{DENOISE_TABLE}.csv", index_col=0)
+    assert list(table.index) == ["noisy input", "PCA", "MFPS", "Refine-Net"]
+    smoke = config.load(by_snakemake / "params.yaml")
+    for category, (level,) in smoke.noise.test.items():
+        expected = 10 * level * np.sqrt(2 / np.pi)
+        assert table.loc["noisy input", f"{category}/mean"] == pytest.approx(expected, rel=0.35), category
+    assert (table.to_numpy() > 0).all()
+
+
 PIPELINE = Pipeline(config.read_raw(REPO / "params.yaml"))
 STEPS = set(PIPELINE.steps)
+#: Steps whose program is missing here: Snakemake's default target skips them, so DVC sees them as not run.
+UNINSTALLED = {name for name, step in PIPELINE.steps.items() if step.needs and not shutil.which(step.needs)}
 MAIN_TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
 #: The evaluated tables; `paper_comparison`, which reads their CSV files, names the data and protocol too.
 TABLES = set(EVALUATED)
@@ -106,8 +150,10 @@ RELEASE = {"release"}
 TIME = {"table_time"}
 SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
 #: The figures name the data in their footers; the normals figure shows the estimators' normals.
-FIGURES = {"fig_normals", "fig_clusters", "fig_training"}
+FIGURES = {"fig_normals", "fig_clusters", "fig_training", "fig_denoise", "fig_loss"}
 NORMALS_FIGURE = {"fig_normals"}
+#: The page shows every setting, so every params change remakes it.
+REPORT = {"report"}
 
 
 def family(name: str) -> set[str]:
@@ -120,19 +166,24 @@ def family(name: str) -> set[str]:
     [
         # PCA and Jet also start the Refine-Net of table_initial, which trains on their normals
         ("  jet_k: 100", "  jet_k: 90",
-         family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE),
+         family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE | REPORT),
         ("  theta_t: 60", "  theta_t: 45",
-         {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE),
-        ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE),
-        ("seed: 2022", "seed: 7", SEEDED | RELEASE),
+         {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
+        ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE | REPORT),
+        ("seed: 2022", "seed: 7", SEEDED | RELEASE),  # the page tracks the seed: in SEEDED
         ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",
-         {"clouds_train", "clouds_test", "paper_comparison"} | TABLES | RELEASE | TIME | FIGURES),
-        ("  hmp_k: 100", "  hmp_k: 90", family("features") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE),
+         {"clouds_train", "clouds_test", "paper_comparison", DENOISE_TABLE} | TABLES | RELEASE | TIME | FIGURES
+         | REPORT),
+        ("  hmp_k: 100", "  hmp_k: 90",
+         family("features") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
+        # the denoising application (and the release, whose settings `refinenet denoise` uses)
+        ("  sigma: 0.35", "  sigma: 0.3", {"denoise", DENOISE_TABLE, "fig_denoise"} | RELEASE | REPORT),
         ("  n_clusters: 4", "  n_clusters: 3",
-         family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"}),
-        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE),
+         family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"} | REPORT),
+        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE | REPORT),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
-        ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}", {"training_l1", "table_loss"}),
+        ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}",
+         {"training_l1", "table_loss"} | REPORT),
     ],
 )
 def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, new, steps):

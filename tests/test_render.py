@@ -4,7 +4,18 @@ normals colour by their axis whatever their sign, and the figure's files are the
 import numpy as np
 import pandas as pd
 
-from refinenet.evaluation.figures import Panel, clusters_figure, normals_figure, training_figure
+from refinenet.evaluation.figures import (
+    DenoisedColumn,
+    Panel,
+    better,
+    clusters_figure,
+    denoising_figure,
+    loss_figure,
+    normals_figure,
+    shaded_surface,
+    training_figure,
+)
+from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.evaluation.render import normal_colours, splat, splat_radius, view_rotation
 
 RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
@@ -64,3 +75,43 @@ def test_the_cluster_and_training_figures_are_the_same_bytes_on_every_run(tmp_pa
         training_figure({0: history, 1: history.iloc[:0]}, "variant full", "profile test", training)
         files.append([p.read_bytes() for p in (*clusters.values(), *training.values())])
     assert files[0] == files[1]
+
+
+def test_the_denoising_figure_is_the_same_bytes_on_every_run_and_shades_by_facing(tmp_path):
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    triangles = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    rotation = view_rotation()
+    points, grey = shaded_surface(vertices, triangles, rotation, n_points=2000)
+    assert points.shape == (2000, 3) and np.allclose(grey[:, 0], grey[:, 2])
+    assert 0.25 <= grey.min() and grey.max() <= 0.95  # lit between the ambient level and full facing light
+    rng = np.random.default_rng(2)
+    cloud = rng.normal(size=(300, 3))
+    columns = [DenoisedColumn(name, cloud, np.abs(rng.normal(size=300)) * 1e-3, (vertices, triangles))
+               for name in ("noisy input", "PCA")]
+    files = []
+    for run in range(2):
+        paths = {"png": tmp_path / f"d{run}.png", "pdf": tmp_path / f"d{run}.pdf"}
+        denoising_figure(columns, 2e-3, "profile test", paths, size=80)
+        files.append([p.read_bytes() for p in paths.values()])
+    assert files[0] == files[1]
+
+
+def test_the_loss_figure_colours_each_point_by_the_better_network(tmp_path):
+    """L1's estimate exact on the first 300 points and 20 deg off on the other 100, L2's 10 deg off everywhere: 75% of
+    the points blue (L1 better), 25% red; the same bytes on every run."""
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(400, 3))
+    truth = np.tile([0.0, 0.0, 1.0], (400, 1))
+    tilt = np.radians(np.where(np.arange(400) < 300, 0.0, 20.0))
+    l1 = np.c_[np.sin(tilt), np.zeros(400), np.cos(tilt)]
+    l2 = np.tile([np.sin(np.radians(10.0)), 0.0, np.cos(np.radians(10.0))], (400, 1))
+    panel = Panel("test/plane", points, truth, {"L1": l1, "L2": l2})
+    files = []
+    for run in range(2):
+        paths = {"png": tmp_path / f"l{run}.png", "pdf": tmp_path / f"l{run}.pdf"}
+        loss_figure([panel], "profile test", paths, size=80)
+        files.append([p.read_bytes() for p in paths.values()])
+    assert files[0] == files[1]
+    winner = better(unoriented_angles(l1, truth), unoriented_angles(l2, truth))
+    assert (winner[:300] == -1).all() and (winner[300:] == 1).all()
+    assert np.array_equal(better(np.ones(3), np.ones(3)), np.zeros(3))

@@ -4,22 +4,9 @@ import shutil
 import subprocess
 
 import numpy as np
-import pandas as pd
 import pytest
 
-from refinenet.evaluation.metrics import ErrorStats
-from refinenet.evaluation.table import aggregate, metrics_record, stats_row, to_csv_frame, to_latex
-
-
-@pytest.fixture
-def per_cloud():
-    rows = []
-    for method, scale in (("pca", 2.0), ("jet", 1.0)):
-        for category, base in (("SmoothSurface", 1.0), ("BigNoise", 3.0), ("SharpFeature", 2.0)):
-            for i, n in enumerate((10, 30)):
-                angles = np.full(n, scale * base * (i + 1))
-                rows.append(stats_row(method, category, f"{category}_{i}", ErrorStats.from_angles(angles)))
-    return pd.DataFrame(rows)
+from refinenet.evaluation.table import aggregate, metrics_record, to_csv_frame, to_latex
 
 
 def test_aggregate_synthetic(per_cloud):

@@ -2,6 +2,7 @@
 # wildcard constraints, and the DVC record hook.
 
 import os
+import shutil
 import sys
 
 from refinenet.errors import RefineNetError
@@ -38,3 +39,11 @@ def record_in_dvc():
     Skipped when DVC itself runs Snakemake (the bridge sets REFINENET_BRIDGE)."""
     if not os.environ.get("REFINENET_BRIDGE"):
         shell("python -m refinenet.pipeline.bridge record")
+
+
+def installed(step):
+    """Whether the program a step needs (if any) is installed; the default target skips the step, saying so, if not."""
+    if step.needs and shutil.which(step.needs) is None:
+        print(f"skipping {step.name}: {step.needs} is not installed", file=sys.stderr)
+        return False
+    return True

@@ -50,6 +50,30 @@ rule fig_clusters:
         " --clusters {input.clusters} --sweep {input.sweep} 2>&1 | tee {log}"
 
 
+# [P] fig:loss2: one test shape at increasing noise, each point blue where L1 gives the lower error, red where L2 does.
+
+
+rule fig_loss:
+    message:
+        "fig_loss: L1 against L2 per point"
+    input:
+        code=PIPE.steps["fig_loss"].code,
+        clouds=[wf.CLOUD.format(cloud=key) for key in PIPE.loss_figure_keys()],
+        normals=[PIPE.normals_path(m, key) for m in wf.TABLES["table_loss"].methods for key in PIPE.loss_figure_keys()],
+    output:
+        **wf.FIGURE_LOSS,
+    params:
+        tracked=tracked("fig_loss"),
+    log:
+        "logs/fig/fig_loss.log",
+    benchmark:
+        "logs/fig/fig_loss.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
+    shell:
+        "python -m stages.fig --figure loss --clouds {input.clouds} 2>&1 | tee {log}"
+
+
 # Training loss and validation error per epoch of every cluster, one figure per trained variant.
 
 
@@ -75,3 +99,28 @@ rule fig_training:
         "../envs/refinenet.yaml"
     shell:
         "python -m stages.fig --figure training 2>&1 | tee {log}"
+
+
+# [P] fig:block: one test cloud denoised with each method's normals, its points and screened Poisson surfaces.
+
+if "fig_denoise" in PIPE.steps:
+
+    rule fig_denoise:
+        message:
+            "fig_denoise: denoised points and surfaces"
+        input:
+            code=PIPE.steps["fig_denoise"].code,
+            cloud=wf.CLOUD.format(cloud=PIPE.denoise_figure_key()),
+            record=wf.DENOISED.format(cloud=PIPE.denoise_figure_key()),
+        output:
+            **wf.FIGURE_DENOISE,
+        params:
+            tracked=tracked("fig_denoise"),
+        log:
+            "logs/fig/fig_denoise.log",
+        benchmark:
+            "logs/fig/fig_denoise.benchmark.tsv"
+        conda:
+            "../envs/refinenet.yaml"
+        shell:
+            "python -m stages.fig --figure denoise --clouds {input.cloud} --records {input.record} 2>&1 | tee {log}"

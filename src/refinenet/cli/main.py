@@ -22,6 +22,8 @@ EXAMPLES = """examples:
   refinenet normals street.xyz -o street.npy --orient viewpoint --viewpoint 0 0 2
   refinenet normals scan.ply -o scan.xyz --initial other_method.normals   refine another estimator's normals
   refinenet normals scan.pcd -o scan_pca.ply --method pca --orient none
+  refinenet denoise scan_normals.ply -o scan_denoised.ply --surface scan_surface.ply
+                                                                 move points along their normals (paper §Application)
   refinenet info                                                 provenance of the shipped networks
 
 Inputs: .xyz/.txt (3 or 6 columns), .ply, .pcd, .npy (N x 3 or N x 6). Outputs by extension: .ply/.pcd with
@@ -58,6 +60,21 @@ def parser() -> argparse.ArgumentParser:
                          help="points per spatial tile; larger clouds are processed tile by tile (default 500000)")
     normals.add_argument("--release", metavar="FOLDER", help="a release exported by `snakemake release` "
                                                              "(default: the networks shipped with the package)")
+    denoise = commands.add_parser("denoise", help="denoise a point cloud along its normals (docs/algorithm.md §11)",
+                                  formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
+    denoise.add_argument("input", help="the point cloud, with its normals unless --normals gives them")
+    denoise.add_argument("-o", "--output", required=True, help="the denoised cloud and its normals (format from "
+                                                               "its extension)")
+    denoise.add_argument("--normals", metavar="FILE", help="the normals (.normals, .npy, or a point file with normals)")
+    denoise.add_argument("--surface", metavar="MESH", help="also write the screened Poisson surface of the result "
+                                                           "(.ply or .obj; needs oriented normals)")
+    for name, help_text in (("radius", "ball radius of the neighbourhoods, in bounding-box diagonals"),
+                            ("sigma", "width of the normal similarity"),
+                            ("lam", "lambda, weight of the neighbours' normals"),
+                            ("iterations", "point updates"), ("poisson-depth", "octree depth of --surface")):
+        kind = int if name in ("iterations", "poisson-depth") else float
+        denoise.add_argument(f"--{name}", type=kind, help=f"{help_text} (default: the release's params)")
+    denoise.add_argument("--release", metavar="FOLDER", help="the release whose denoise settings are the defaults")
     info = commands.add_parser("info", help="print the model card of the shipped networks")
     info.add_argument("--release", metavar="FOLDER", help="another release folder")
     return top
@@ -72,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     from refinenet.errors import RefineNetError
 
     try:
-        return normals(args) if args.command == "normals" else info(args)
+        return {"normals": normals, "denoise": denoise, "info": info}[args.command](args)
     except RefineNetError as err:
         return _fail(str(err))
 
@@ -107,7 +124,6 @@ def normals(args: argparse.Namespace) -> int:
         check_file,
         check_output_type,
         read_cloud,
-        read_normals,
         write_points,
     )
     from refinenet.errors import InputError, OutputError
@@ -132,16 +148,7 @@ def normals(args: argparse.Namespace) -> int:
         raise InputError("--device", str(err)) from None
     release = _release(args, device, with_networks=args.method == "refinenet")
     cloud = read_cloud(args.input, min_points=min_points(release.params, args.method, args.initial is not None))
-    initial = None
-    if args.initial:
-        if Path(args.initial).suffix.lower() in (".normals", ".npy"):
-            initial = read_normals(args.initial, len(cloud))
-        else:
-            initial = read_cloud(args.initial).normals
-            if initial is None:
-                raise InputError(args.initial, "has no normals")
-            if len(initial) != len(cloud):
-                raise InputError(args.initial, f"{len(initial)} normals for {len(cloud)} points of {args.input}")
+    initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
     progress = sys.stderr.isatty()
     result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
                               args.tile_points or TILE_POINTS, args.threads, progress)
@@ -152,6 +159,67 @@ def normals(args: argparse.Namespace) -> int:
     write_points(output, cloud.points, result)
     print(f"{output}: {len(cloud):,} points, {args.method} normals ({args.orient} orientation) in "
           f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+    return 0
+
+
+def _given_normals(path: str, cloud_path: str, n_points: int):
+    """Normals of `n_points` points from a normals file (.normals, .npy) or a point file with normals."""
+    from refinenet.data.io import read_cloud, read_normals
+    from refinenet.errors import InputError
+
+    if Path(path).suffix.lower() in (".normals", ".npy"):
+        return read_normals(path, n_points)
+    normals = read_cloud(path).normals
+    if normals is None:
+        raise InputError(path, "has no normals")
+    if len(normals) != n_points:
+        raise InputError(path, f"{len(normals)} normals for {n_points} points of {cloud_path}")
+    return normals
+
+
+def denoise(args: argparse.Namespace) -> int:
+    """The point update of [P] §Application along the given normals, and optionally the surface of the result."""
+    from dataclasses import asdict, replace
+
+    from refinenet.atomic import atomic_path
+    from refinenet.config import validate_block
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, check_output_type, read_cloud, write_points
+    from refinenet.data.noise import bbox_diagonal
+    from refinenet.errors import InputError, OutputError
+    from refinenet.evaluation.denoise import point_update, poisson_surface
+
+    start = time.perf_counter()
+    check_file(args.input, POINT_FILE_SUFFIXES, "point file")
+    check_output_type(args.output)
+    if args.surface and Path(args.surface).suffix.lower() not in (".ply", ".obj"):
+        raise OutputError(args.surface, "unsupported surface type (use .ply or .obj)")
+    settings = replace(_release(args, with_networks=False).params.denoise,
+                       **{k: v for k, v in (("radius", args.radius), ("sigma", args.sigma), ("lam", args.lam),
+                                            ("iterations", args.iterations), ("poisson_depth", args.poisson_depth))
+                          if v is not None})
+    validate_block("denoise", asdict(settings), "command line")
+    cloud = read_cloud(args.input, min_points=3)
+    normals = _given_normals(args.normals, args.input, len(cloud)) if args.normals else cloud.normals
+    if normals is None:
+        raise InputError(args.input, "has no normals: give them with --normals, or run `refinenet normals` first")
+    try:
+        points = point_update(cloud.points, normals, settings.radius * bbox_diagonal(cloud.points), settings.sigma,
+                              settings.lam, settings.iterations)
+        surface = poisson_surface(points, normals, settings.poisson_depth) if args.surface else None
+    except ValueError as err:
+        raise InputError(args.normals or args.input, str(err)) from None
+    write_points(args.output, points, normals)
+    if surface is not None:
+        import open3d as o3d
+
+        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(surface[0]), o3d.utility.Vector3iVector(surface[1]))
+        with atomic_path(args.surface) as tmp:
+            if not o3d.io.write_triangle_mesh(str(tmp), mesh):
+                raise OutputError(args.surface, "cannot be written")
+    print(f"{args.output}: {len(cloud):,} points denoised ({settings.iterations} updates, radius {settings.radius} "
+          f"l_d, sigma {settings.sigma}, lambda {settings.lam}) in {time.perf_counter() - start:.1f} s"
+          + (f"; surface {args.surface}: {len(surface[1]):,} triangles" if surface is not None else ""),
+          file=sys.stderr)
     return 0
 
 

@@ -17,12 +17,17 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from refinenet.atomic import atomic_path  # noqa: E402
+from refinenet.data.meshes import sample_mesh  # noqa: E402
 from refinenet.evaluation.metrics import unoriented_angles  # noqa: E402
 from refinenet.evaluation.render import normal_colours, splat, view_rotation  # noqa: E402
 
 #: The heat map's range in degrees: errors above it saturate.
 MAX_ERROR = 30.0
 COLORMAP = "jet"
+#: fig:loss2's colours of `better`'s -1 (the first method, L1), 0 (equal) and 1 (the second, L2).
+WINNER_COLOURS = np.array([[0.1, 0.3, 0.9], [0.7, 0.7, 0.7], [0.9, 0.15, 0.1]])
+#: Points drawn per reconstructed surface: dense enough to close every gap at 300 pixels.
+SURFACE_SPLATS = 100_000
 #: Metadata that would change from run to run, left out of every file.
 STABLE = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None, "Creator": None}}
 
@@ -118,3 +123,65 @@ def training_figure(histories: Mapping[int, pd.DataFrame], title: str, footer: s
     fig.suptitle(title, fontsize=8)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     _save(fig, footer, paths)
+
+
+@dataclass(frozen=True)
+class DenoisedColumn:
+    """One column of the denoising figure: points with their distances to the true surface (in l_d), and the
+    surface reconstructed from them (vertices, triangles)."""
+
+    title: str
+    points: np.ndarray
+    distance: np.ndarray
+    surface: tuple[np.ndarray, np.ndarray]
+
+
+def denoising_figure(columns: Sequence[DenoisedColumn], clip: float, footer: str, paths: Mapping[str, str | Path],
+                     size: int = 300) -> None:
+    """[P] fig:block: per column, the points coloured by their distance to the true surface (heat map clipped at
+    `clip`, in l_d) with the mean in the title, and below them the reconstructed surface, shaded."""
+    rotation = view_rotation()
+    colormap = plt.get_cmap(COLORMAP)
+    fig, axes = plt.subplots(2, len(columns), figsize=(1.9 * len(columns), 4.2), dpi=150, squeeze=False)
+    for (top, bottom), column in zip(axes.T, columns, strict=True):
+        top.imshow(splat(column.points, colormap(np.clip(column.distance / clip, 0.0, 1.0))[:, :3], rotation, size))
+        top.set_title(f"{column.title}\nmean {1e3 * column.distance.mean():.3f} x 1e-3 l_d", fontsize=6)
+        vertices, triangles = column.surface
+        if len(triangles):
+            bottom.imshow(splat(*shaded_surface(vertices, triangles, rotation), rotation, size))
+        bottom.set_title(f"surface: {len(triangles)} triangles", fontsize=6)
+    for ax in axes.ravel():
+        ax.set_axis_off()
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    _save(fig, footer, paths)
+
+
+def shaded_surface(vertices: np.ndarray, triangles: np.ndarray, rotation: np.ndarray,
+                   n_points: int = SURFACE_SPLATS) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh as dense splats: points uniform by area on its triangles (a fixed seed) and their grey levels, lit from
+    the viewer (two-sided Lambert on the face normal), so a coarse mesh still reads as a closed surface."""
+    points, normals = sample_mesh(vertices, triangles, n_points, np.random.default_rng(0))
+    grey = 0.25 + 0.7 * np.abs(normals @ rotation[2])
+    return points, np.repeat(grey[:, None], 3, axis=1)
+
+
+def loss_figure(panels: Sequence[Panel], footer: str, paths: Mapping[str, str | Path], size: int = 300) -> None:
+    """[P] fig:loss2: per panel (a cloud, with the estimates of two methods by name, the first L1's), the points blue
+    where the first method's error is lower and red where the second's is (grey where equal), and the share of each
+    in the title."""
+    rotation = view_rotation()
+    fig, axes = plt.subplots(1, len(panels), figsize=(2.4 * len(panels), 2.9), dpi=150, squeeze=False)
+    for ax, panel in zip(axes[0], panels, strict=True):
+        winner = better(*(unoriented_angles(n, panel.truth) for n in panel.estimates.values()))
+        ax.imshow(splat(panel.points, WINNER_COLOURS[winner + 1], rotation, size))
+        first, second = panel.estimates
+        ax.set_title(f"{panel.title}\n{first} better at {100 * np.mean(winner < 0):.1f}% (blue), "
+                     f"{second} at {100 * np.mean(winner > 0):.1f}% (red)", fontsize=6)
+        ax.set_axis_off()
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    _save(fig, footer, paths)
+
+
+def better(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Per point: -1 where the first error is the lower, 1 where the second is, 0 where they are equal."""
+    return np.sign(first - second).astype(np.int64)

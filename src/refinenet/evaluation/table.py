@@ -145,4 +145,4 @@ def to_latex(table: pd.DataFrame, caption: str, label: str, names: dict[str, str
 def latex_escape(text: str) -> str:
     for char in "&%$#_{}":
         text = text.replace(char, "\\" + char)
-    return text
+    return text.replace("^", "\\^{}")

@@ -196,9 +196,53 @@ FIGURE_CATEGORIES = ("SharpFeature", "RichFeature")
 #: the Kc curve of table_clusters.
 FIGURE_CLUSTERS = {"png": "reports/figures/clusters.png", "pdf": "reports/figures/clusters.pdf"}
 CLUSTER_FIGURE_VARIANTS = ("kc2", FULL)
+#: [P] fig:loss2: one shape at increasing noise, each point blue where L1 (variant l1) gives the lower error and red
+#: where L2 (full, mse) does.
+FIGURE_LOSS = {"png": "reports/figures/l1_against_l2.png", "pdf": "reports/figures/l1_against_l2.pdf"}
 #: Training loss and validation error per epoch of every cluster, one figure per trained variant.
 FIGURE_TRAINING_DIR = "reports/figures/training"
 FIGURE_TRAINING = f"{FIGURE_TRAINING_DIR}/{{variant}}.png"
+
+
+#: [P] §Application (docs/algorithm.md §11): every test cloud with a known clean surface denoised with the normals of
+#: each method, a record of its points and distances to the true surface per cloud, a table of the distances and a
+#: figure of the denoised points and surfaces.
+DENOISED = "results/denoised/{cloud}.npz"
+DENOISE_METHODS = ("pca", "mfps", REFINENET)
+DENOISE_INPUT = "input"
+DENOISE_NAMES = {DENOISE_INPUT: "noisy input", **METHOD_NAMES}
+DENOISE_TABLE = "table_denoise"
+FIGURE_DENOISE = {"png": "reports/figures/denoising.png", "pdf": "reports/figures/denoising.pdf"}
+
+
+@dataclass(frozen=True)
+class TableEntry:
+    """A table of the page: its CSV (rendered), its LaTeX (whose caption it shows) and every file to link."""
+
+    name: str
+    csv: str
+    tex: str | None
+    links: dict[str, str]
+
+
+@dataclass(frozen=True)
+class FigureEntry:
+    """A figure of the page: the PNG shown, what it shows, and every file to link (e.g. the PDF)."""
+
+    name: str
+    png: str
+    caption: str
+    links: dict[str, str]
+
+
+#: The page with every table and figure (`evaluation.report`), and one LaTeX document of every table; report_pdf
+#: compiles that document where pdflatex is installed.
+REPORT_FILES = {"html": "reports/index.html", "tex": "reports/tables.tex"}
+TABLES_PDF = "reports/tables.pdf"
+REPORT_DIR = "reports"
+#: Files that hold the timings of the run that made them (table_time and the reports that include it): they differ
+#: from run to run.
+TIMED_FILES = (*TIME_FILES.values(), *REPORT_FILES.values(), TABLES_PDF)
 
 
 #: The main job (`snakemake main`, scripts/run.sh): the synthetic benchmark's tables and the shipped release, within
@@ -228,6 +272,9 @@ class Step:
     """The Refine-Net variant whose settings the step runs with."""
     split: str | None = None
     """The one split whose clouds the step covers, where its instances divide the work by split."""
+    needs: str | None = None
+    """A program the step needs beyond the Python environment; Snakemake's default target skips the step, with a
+    message, where it is not installed."""
 
     @property
     def code(self) -> list[str]:
@@ -347,11 +394,62 @@ class Pipeline:
         """The variants with networks of their own (full's first)."""
         return [v for v in self.params if self.owner(v, "training") == v]
 
+    def denoise_keys(self) -> list[str]:
+        """The test clouds the denoising application covers: those synthesised from a surface (a procedural shape or
+        a mesh), against which distances are measured."""
+        return [c.key for c in self.clouds if c.split == "test" and c.noise is not None]
+
+    def denoise_figure_key(self) -> str:
+        """The cloud of the denoising figure: the normals figure's first cloud, if the application covers it."""
+        keys = self.denoise_keys()
+        return next((k for k in self.figure_keys() if k in keys), keys[0])
+
     def figure_keys(self) -> list[str]:
         """The test clouds of the normals figure: the first of each FIGURE_CATEGORIES category, or (a source
         without them) the first test cloud."""
         first = first_test_clouds(self.full)
         return [first[c] for c in FIGURE_CATEGORIES if c in first] or [next(iter(first.values()))]
+
+    def reported(self) -> tuple[list[TableEntry], list[FigureEntry]]:
+        """Every table and figure of the report page, paths relative to the page's folder."""
+        def rel(paths: dict[str, str]) -> dict[str, str]:
+            return {kind: os.path.relpath(path, REPORT_DIR) for kind, path in paths.items()}
+        denoise = bool(self.denoise_keys())
+        tables = [TableEntry(name, files["csv"], files["tex"], files)
+                  for name, files in [*((n, rel(Table.files(n))) for n in TABLES),
+                                      *([(DENOISE_TABLE, rel(Table.files(DENOISE_TABLE)))] if denoise else []),
+                                      ("table_time", rel(TIME_FILES)), ("table_architecture", rel(ARCHITECTURE_FILES))]]
+        sweep = rel({"png": Table.files("table_clusters", TABLES["table_clusters"])["plot"]})
+        figures = [
+            FigureEntry("normals_and_errors", **_figure(rel(FIGURE_NORMALS)), caption=(
+                "[P] fig:syn / fig:insight: normals as RGB and unoriented angular-error heat maps of "
+                f"{', '.join(METHOD_NAMES[m] for m in FIGURE_METHODS)} on the first test cloud of "
+                f"{' and '.join(FIGURE_CATEGORIES)}; each panel's mean error in its title.")),
+            FigureEntry("clusters", **_figure(rel(FIGURE_CLUSTERS)), caption=(
+                "[P] fig:cluster: a test cloud coloured by cluster for "
+                f"{' and '.join(f'variant {v}' for v in CLUSTER_FIGURE_VARIANTS)}, beside the Kc curve.")),
+            *([FigureEntry("denoising", **_figure(rel(FIGURE_DENOISE)), caption=(
+                "[P] fig:block: a test cloud denoised with the normals of "
+                f"{', '.join(METHOD_NAMES[m] for m in DENOISE_METHODS)} (top: points coloured by their distance to "
+                "the true surface; bottom: screened Poisson surfaces), beside the noisy input and the true surface."))]
+              if denoise else []),
+            FigureEntry("l1_against_l2", **_figure(rel(FIGURE_LOSS)), caption=(
+                "[P] fig:loss2: one test shape at increasing noise, each point blue where Refine-Net trained with L1 "
+                "has the lower error and red where the L2 (mse) network has; the share of blue points in each title.")),
+            FigureEntry("table_clusters", **_figure(sweep),
+                        caption="The Kc sweep: Average mean error against the number of clusters (table_clusters)."),
+            *(FigureEntry(f"training_{v}", **_figure(rel({"png": FIGURE_TRAINING.format(variant=v)})),
+                          caption=f"Training loss and validation error per epoch of every cluster of variant {v}.")
+              for v in self.trained),
+        ]
+        return tables, figures
+
+    def loss_figure_keys(self) -> list[str]:
+        """The test clouds of the L1/L2 figure: the first figure cloud's shape at each of its noise levels, least
+        noise first (the first figure cloud alone where the data gives no shape at several levels)."""
+        first = next(c for c in self.clouds if c.key == self.figure_keys()[0])
+        levels = [c for c in self.clouds if c.split == "test" and c.origin == first.origin and c.noise is not None]
+        return [c.key for c in sorted(levels, key=lambda c: c.noise)] or [first.key]
 
     def rows(self, table: Table) -> dict[str, str]:
         """The table's rows, method -> row name. A sweep table's rows are named and ordered by the swept value,
@@ -470,6 +568,42 @@ class Pipeline:
             targets=lambda: list(files.values()),
         )
 
+    def reported_files(self) -> list[str]:
+        """The files the report page renders or links, as paths from the repository root."""
+        tables, figures = self.reported()
+        files = [os.path.join(REPORT_DIR, p) for entry in (*tables, *figures) for p in entry.links.values()]
+        return list(dict.fromkeys([*files, COMPARISON_FILES["md"]]))
+
+    def _denoise_steps(self) -> list[Step]:
+        """The denoising application's steps, where some test cloud has a known clean surface."""
+        keys = self.denoise_keys()
+        if not keys:
+            return []
+        normals = tuple(dict.fromkeys(map(self.normals_dir, DENOISE_METHODS)))
+        records = os.path.dirname(DENOISED.format(cloud="test/x"))
+        table = Table.files(DENOISE_TABLE)
+        modules = ("evaluation.denoise", *_TABLE, *_STAGE)
+        return [
+            Step(
+                name="denoise", family="denoise", modules=modules, keys=("denoise",),
+                deps=("results/clouds/test", *normals), outs=(records,),
+                targets=lambda: [DENOISED.format(cloud=k) for k in keys], split="test",
+            ),
+            Step(
+                name=DENOISE_TABLE, family="denoise", modules=modules,
+                keys=("data.source", "data.path", "data.n_points", "denoise"),
+                deps=("results/clouds/test", records),
+                outs=tuple(path for kind, path in table.items() if kind != "metrics"), metrics=(table["metrics"],),
+                targets=lambda: list(table.values()),
+            ),
+            Step(
+                name="fig_denoise", family="fig", modules=(*_FIG, "evaluation.denoise", "geometry.orientation"),
+                keys=("data.source", "data.path", "data.n_points", "denoise"),
+                deps=("results/clouds/test", records),
+                outs=tuple(FIGURE_DENOISE.values()), targets=lambda: list(FIGURE_DENOISE.values()),
+            ),
+        ]
+
     def _steps(self) -> list[Step]:
         return [
             *(Step(
@@ -490,7 +624,7 @@ class Pipeline:
                 name="release", family="release",
                 modules=(*_NETWORK, "network.inference", "network.release", "geometry.scale", *_DATA, *_STAGE),
                 keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
-                      "training", "inference", "evaluation"),
+                      "training", "inference", "evaluation", "denoise"),
                 deps=("results/clouds/train", "results/clouds/test", self._files("features", FULL, "test"),
                       self._files("clustering", FULL, ""), self._files("training", FULL, "")),
                 outs=(RELEASE,), targets=lambda: [RELEASE],
@@ -529,11 +663,30 @@ class Pipeline:
                 outs=tuple(FIGURE_CLUSTERS.values()), targets=lambda: list(FIGURE_CLUSTERS.values()),
             ),
             Step(
+                name="fig_loss", family="fig", modules=_FIG, keys=("data.source", "data.path", "data.n_points"),
+                deps=("results/clouds/test", *dict.fromkeys(map(self.normals_dir, TABLES["table_loss"].methods))),
+                outs=tuple(FIGURE_LOSS.values()), targets=lambda: list(FIGURE_LOSS.values()),
+            ),
+            Step(
                 name="fig_training", family="fig", modules=_FIG,
                 keys=("data.source", "data.path", "data.n_points"),
                 deps=tuple(HISTORY_DIR.format(variant=v) for v in self.trained),
                 outs=(FIGURE_TRAINING_DIR,),
                 targets=lambda: [FIGURE_TRAINING.format(variant=v) for v in self.trained],
+            ),
+            *self._denoise_steps(),
+            Step(
+                name="report", family="report", modules=("evaluation.report", *_TABLE, *_STAGE),
+                keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
+                      "training", "inference", "evaluation", "denoise", "variants"),
+                deps=tuple(dict.fromkeys(FIGURE_TRAINING_DIR if p.startswith(f"{FIGURE_TRAINING_DIR}/") else p
+                                         for p in self.reported_files())),
+                outs=tuple(REPORT_FILES.values()),
+                targets=lambda: list(REPORT_FILES.values()),
+            ),
+            Step(
+                name="report_pdf", family="report", modules=("evaluation.report", *_TABLE, *_STAGE), keys=(),
+                deps=(REPORT_FILES["tex"],), outs=(TABLES_PDF,), targets=lambda: [TABLES_PDF], needs="pdflatex",
             ),
             Step(
                 name="table_architecture", family="architecture",
@@ -542,6 +695,11 @@ class Pipeline:
                 deps=(), outs=tuple(ARCHITECTURE_FILES.values()), targets=lambda: list(ARCHITECTURE_FILES.values()),
             ),
         ]
+
+
+def _figure(files: dict[str, str]) -> dict[str, Any]:
+    """A figure's PNG and its links (every format it is written in)."""
+    return {"png": files["png"], "links": files}
 
 
 def _blocks(methods: tuple[str, ...]) -> tuple[str, ...]:

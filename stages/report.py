@@ -1,0 +1,46 @@
+"""The reports in one place, one `--output` per step:
+* page (report): reports/index.html, every table rendered from its CSV and every figure, with the profile and the
+  settings that made them; and reports/tables.tex, one LaTeX document of every table;
+* pdf (report_pdf): reports/tables.pdf, that document compiled with pdflatex."""
+
+from dataclasses import asdict
+
+import yaml
+
+from refinenet import config
+from refinenet.atomic import write_text
+from refinenet.evaluation.report import compile_pdf, page, tables_document
+from refinenet.pipeline import stage
+from refinenet.pipeline.workflow import (
+    COMPARISON_FILES,
+    FULL,
+    REPORT_DIR,
+    REPORT_FILES,
+    TABLES_PDF,
+    Pipeline,
+    data_line,
+)
+
+
+def arguments(parser):
+    parser.add_argument("--output", required=True, choices=("page", "pdf"))
+
+
+def main(params, args):
+    if args.output == "pdf":
+        compile_pdf(REPORT_FILES["tex"], TABLES_PDF)
+        return
+    pipe = Pipeline(config.read_raw(args.params), args.params)
+    tables, figures = pipe.reported()
+    settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full)}, sort_keys=False, width=120)
+    changes = {v: pipe.changes(v) for v in pipe.params if v != FULL}
+    settings += "\n# Refine-Net variants: what each changes\n" + yaml.safe_dump(changes, sort_keys=False, width=120)
+    title = f"Refine-Net reproduction: reports of profile {params.profile}"
+    notes = {"Comparison with the paper": f"{COMPARISON_FILES['md'].removeprefix(REPORT_DIR + '/')}"}
+    write_text(REPORT_FILES["html"], page(title, data_line(params), tables, figures, notes, settings, REPORT_DIR))
+    write_text(REPORT_FILES["tex"], tables_document(f"{title}. {data_line(params)}",
+                                                    [f"{REPORT_DIR}/{t.tex}" for t in tables]))
+
+
+if __name__ == "__main__":
+    stage.run(__doc__, arguments, main)
