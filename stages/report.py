@@ -3,6 +3,7 @@
   settings that made them; and reports/tables.tex, one LaTeX document of every table;
 * pdf (report_pdf): reports/tables.pdf, that document compiled with pdflatex."""
 
+import os
 from dataclasses import asdict
 
 import yaml
@@ -36,7 +37,7 @@ def main(params, args):
     changes = {v: pipe.changes(v) for v in pipe.params if v != FULL}
     settings += "\n# Refine-Net variants: what each changes\n" + yaml.safe_dump(changes, sort_keys=False, width=120)
     title = f"Refine-Net reproduction: reports of profile {params.profile}"
-    notes = {"Comparison with the paper": f"{COMPARISON_FILES['md'].removeprefix(REPORT_DIR + '/')}"}
+    notes = {"Comparison with the paper": os.path.relpath(COMPARISON_FILES["md"], REPORT_DIR)}
     write_text(REPORT_FILES["html"], page(title, data_line(params), tables, figures, notes, settings, REPORT_DIR))
     write_text(REPORT_FILES["tex"], tables_document(f"{title}. {data_line(params)}",
                                                     [f"{REPORT_DIR}/{t.tex}" for t in tables]))

@@ -48,17 +48,23 @@ def test_normal_colours_ignore_the_sign_and_follow_the_axis():
     assert splat_radius(100_000, 300) == 1 and splat_radius(1_000, 300) == 5 and splat_radius(3, 300) == 6
 
 
+def drawn_twice(tmp_path, draw) -> list[list[bytes]]:
+    """The bytes of the PNG and the PDF that `draw(paths)` writes, on each of two runs."""
+    files = []
+    for run in range(2):
+        paths = {"png": tmp_path / f"{run}.png", "pdf": tmp_path / f"{run}.pdf"}
+        draw(paths)
+        files.append([p.read_bytes() for p in paths.values()])
+    return files
+
+
 def test_the_figure_is_the_same_bytes_on_every_run(tmp_path):
     rng = np.random.default_rng(0)
     points = rng.normal(size=(500, 3))
     truth = points / np.linalg.norm(points, axis=1, keepdims=True)
     noisy = truth + rng.normal(0.0, 0.1, truth.shape)
     panel = Panel("test/sphere", points, truth, {"exact": truth, "noisy": noisy})
-    files = []
-    for run in range(2):
-        paths = {"png": tmp_path / f"{run}.png", "pdf": tmp_path / f"{run}.pdf"}
-        normals_figure([panel], "profile test", paths, size=80)
-        files.append([p.read_bytes() for p in paths.values()])
+    files = drawn_twice(tmp_path, lambda paths: normals_figure([panel], "profile test", paths, size=80))
     assert files[0] == files[1] and files[0][0].startswith(b"\x89PNG") and files[0][1].startswith(b"%PDF")
 
 
@@ -88,11 +94,7 @@ def test_the_denoising_figure_is_the_same_bytes_on_every_run_and_shades_by_facin
     cloud = rng.normal(size=(300, 3))
     columns = [DenoisedColumn(name, cloud, np.abs(rng.normal(size=300)) * 1e-3, (vertices, triangles))
                for name in ("noisy input", "PCA")]
-    files = []
-    for run in range(2):
-        paths = {"png": tmp_path / f"d{run}.png", "pdf": tmp_path / f"d{run}.pdf"}
-        denoising_figure(columns, 2e-3, "profile test", paths, size=80)
-        files.append([p.read_bytes() for p in paths.values()])
+    files = drawn_twice(tmp_path, lambda paths: denoising_figure(columns, 2e-3, "profile test", paths, size=80))
     assert files[0] == files[1]
 
 
@@ -106,11 +108,7 @@ def test_the_loss_figure_colours_each_point_by_the_better_network(tmp_path):
     l1 = np.c_[np.sin(tilt), np.zeros(400), np.cos(tilt)]
     l2 = np.tile([np.sin(np.radians(10.0)), 0.0, np.cos(np.radians(10.0))], (400, 1))
     panel = Panel("test/plane", points, truth, {"L1": l1, "L2": l2})
-    files = []
-    for run in range(2):
-        paths = {"png": tmp_path / f"l{run}.png", "pdf": tmp_path / f"l{run}.pdf"}
-        loss_figure([panel], "profile test", paths, size=80)
-        files.append([p.read_bytes() for p in paths.values()])
+    files = drawn_twice(tmp_path, lambda paths: loss_figure([panel], "profile test", paths, size=80))
     assert files[0] == files[1]
     winner = better(unoriented_angles(l1, truth), unoriented_angles(l2, truth))
     assert (winner[:300] == -1).all() and (winner[300:] == 1).all()
