@@ -1,10 +1,13 @@
 """The paper's figures (docs/algorithm.md §12, Figures), one `--figure` per step:
-* normals (fig:syn / fig:insight): normals of PCA, Jet, MFPS and Refine-Net as RGB and their angular errors as heat
-  maps on chosen test clouds (a PCPNet shape's scored points only: the network computed no others);
+* normals (fig:syn / fig:insight): normals of PCA, Jet, MFPS, Refine-Net and the variants asked for as RGB and
+  their angular errors as heat maps on chosen test clouds (a PCPNet shape's scored points only: the network
+  computed no others);
 * clusters (fig:cluster): a test cloud coloured by cluster for Kc = 2 and Kc = 4, beside the Kc curve;
 * loss (fig:loss2): one shape at increasing noise, each point blue where the L1 network has the lower error, red
   where the L2 one has;
 * training: training loss and validation error per epoch of every cluster, one figure per trained variant;
+* real (fig:real_boy / fig:outdoor): normals as RGB on real scans (no ground truth) by PCA, Jet, MFPS and the
+  X = 8 variant's networks, through the chain of `refinenet normals` (radii from the point spacing);
 * denoise (fig:block): one test cloud's points after denoising with each method's normals, coloured by their
   distance to the true surface, and the screened Poisson surface of each (normals oriented by `orient_mst`), beside
   the noisy input and the true surface."""
@@ -13,23 +16,29 @@ import numpy as np
 import pandas as pd
 
 from refinenet import config
-from refinenet.data.clouds import cloud_key, scored_points, surface_sample
+from refinenet.cli.estimate import estimate_normals, min_points
+from refinenet.data.clouds import cloud_key, read_scan, scan_files, scored_points, surface_sample
 from refinenet.data.io import read_cloud, read_normals
 from refinenet.evaluation.denoise import poisson_surface, read_record
 from refinenet.evaluation.figures import (
     MAX_ERROR,
     DenoisedColumn,
     Panel,
+    Scan,
     clusters_figure,
     denoising_figure,
     loss_figure,
     normals_figure,
+    real_figure,
     training_figure,
 )
 from refinenet.evaluation.table import METHOD_NAMES
 from refinenet.features.cache import load_for_cloud
 from refinenet.geometry.orientation import orient_mst
 from refinenet.network.clustering import cloud_clusters, load_cluster_model
+from refinenet.network.inference import load_networks
+from refinenet.network.model import architecture
+from refinenet.network.release import Release
 from refinenet.pipeline import stage
 from refinenet.pipeline.workflow import (
     CLUSTER_FIGURE_VARIANTS,
@@ -38,21 +47,30 @@ from refinenet.pipeline.workflow import (
     FIGURE_CLUSTERS,
     FIGURE_DENOISE,
     FIGURE_LOSS,
-    FIGURE_METHODS,
     FIGURE_NORMALS,
+    FIGURE_REAL,
     FIGURE_TRAINING,
     HISTORY,
+    REAL_METHODS,
+    REAL_VARIANT,
+    REFINENET,
     TABLES,
     Pipeline,
     data_line,
+    figure_name,
 )
 
 
 def arguments(parser):
-    parser.add_argument("--figure", required=True, choices=("normals", "clusters", "training", "denoise", "loss"))
-    parser.add_argument("--clouds", nargs="+", default=[], help="the figure's test cloud records (.npz)")
+    parser.add_argument("--figure", required=True,
+                        choices=("normals", "clusters", "training", "denoise", "loss", "real"))
+    parser.add_argument("--clouds", nargs="+", default=[],
+                        help="the figure's test cloud records (.npz); real: the training clouds (their spacing)")
     parser.add_argument("--features", help="clusters: the cloud's feature cache (full's)")
-    parser.add_argument("--clusters", nargs="+", default=[], help="clusters: the cluster model of each Kc shown")
+    parser.add_argument("--clusters", nargs="+", default=[],
+                        help="clusters: the cluster model of each Kc shown; real: the X = 8 variant's")
+    parser.add_argument("--scans", help="real: the folder of scans")
+    parser.add_argument("--networks", nargs="+", default=[], help="real: the network folder of each cluster")
     parser.add_argument("--sweep", help="clusters: table_clusters' CSV")
     parser.add_argument("--records", nargs="+", default=[], help="denoise: the cloud's denoising record")
 
@@ -61,7 +79,7 @@ def main(params, args):
     pipe = Pipeline(config.read_raw(args.params), args.params)
     footer = data_line(params)
     if args.figure == "normals":
-        normals_figure(panels(pipe, args.clouds, {m: METHOD_NAMES[m] for m in FIGURE_METHODS}),
+        normals_figure(panels(pipe, args.clouds, {m: figure_name(m) for m in pipe.figure_methods()}),
                        footer + f" Unoriented angular error, heat map clipped at {MAX_ERROR:g} deg; "
                        "orthographic view, azimuth 35, elevation 25 deg.", FIGURE_NORMALS)
     elif args.figure == "loss":
@@ -71,6 +89,8 @@ def main(params, args):
         clusters(pipe, args.clouds[0], args.features, args.clusters, args.sweep, footer)
     elif args.figure == "denoise":
         denoise(params.denoise, args.clouds[0], args.records[0], footer)
+    elif args.figure == "real":
+        real(pipe.params[REAL_VARIANT], args.scans, args.clouds, args.clusters[0], args.networks, footer)
     else:
         for v in pipe.trained:
             n = pipe.params[v].clustering.n_clusters
@@ -106,6 +126,24 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
                     ([pipe.swept(m, key) for m in rows], [float(errors[label]) for label in rows.values()]),
                     footer + f" Cloud {cloud_key(cloud_path, cloud)}.", FIGURE_CLUSTERS)
 
+
+
+def real(params, folder, training_clouds, cluster_path, network_folders, footer):
+    model, _ = load_cluster_model(cluster_path)
+    networks = load_networks(network_folders, architecture(params.network, params.features, params.patches),
+                             params.inference.device)
+    release = Release.of_run(params, model, networks, [read_cloud(path).points for path in training_clouds])
+    least = min_points(params, REFINENET, refine_initial=False)
+    scans = []
+    for path in scan_files(folder):
+        points = read_scan(path, params.figures.scan_points, params.seed, least)
+        estimates = {METHOD_NAMES[m]: estimate_normals(points, release, m) for m in REAL_METHODS if m != REFINENET}
+        estimates[f"{METHOD_NAMES[REFINENET]} (X = {params.features.n_normals})"] = estimate_normals(
+            points, release, REFINENET, initial=estimates[METHOD_NAMES["mfps"]])
+        scans.append(Scan(path.stem, points, estimates))
+    most = params.figures.scan_points
+    real_figure(scans, footer + f" Real scans of {folder}" + (f", at most {most:,} points each" if most else "")
+                + "; l_d from the point spacing; each scan seen along its depth axis.", FIGURE_REAL)
 
 
 def denoise(config, cloud_path, record_path, footer):

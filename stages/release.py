@@ -12,11 +12,10 @@ from refinenet.data.io import read_cloud
 from refinenet.data.noise import derive_seed
 from refinenet.errors import InputError
 from refinenet.features.cache import load_for_cloud
-from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.clustering import load_cluster_model
 from refinenet.network.inference import load_networks
 from refinenet.network.model import RefineNet, architecture
-from refinenet.network.release import export, half_precision_change, parameter_counts
+from refinenet.network.release import export, half_precision_change, parameter_counts, training_spacing
 from refinenet.network.training import RESULT, network_fingerprint
 from refinenet.pipeline import stage
 
@@ -56,7 +55,7 @@ def main(params, args):
             "clouds": len(clouds),
             "points_per_cloud": int(np.median([len(c) for c in clouds])),
             "noise_percent": sorted({c.meta.get("noise_percent") for c in clouds} - {None}),
-            "spacing_ratio": float(np.median([spacing_ratio(c.points) for c in clouds])),
+            "spacing_ratio": training_spacing([c.points for c in clouds]),
         },
         "clusters": {str(c): json.loads((Path(folder) / RESULT).read_text()) for c, folder in enumerate(args.networks)},
         "half_precision": half_precision_change(checks, model, networks, params.patches, params.inference,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from settings import BASE
 
-from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud, surface_sample
+from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud, read_scan, scan_files, surface_sample
 from refinenet.data.io import write_ply
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError, ParamsError
@@ -117,3 +117,25 @@ def test_the_true_surface_of_a_noisy_cloud_lies_one_noise_sigma_away():
     assert np.mean(on_surface < 1e-9) > 0.97 and on_surface.max() < 2 * spacing
     with pytest.raises(InputError, match="given.npz: a given cloud has no known clean surface"):
         surface_sample("given.npz", {"noise_percent": None}, 100)
+
+
+def test_a_scans_folder_reads_point_files_and_mesh_vertices_and_subsets_by_seed(tmp_path):
+    rng = np.random.default_rng(6)
+    points = rng.normal(size=(500, 3))
+    np.savetxt(tmp_path / "b_tile.xyz", points)
+    (tmp_path / "a_mesh.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n")
+    (tmp_path / "notes.md").write_text("not a scan")
+    files = scan_files(tmp_path)
+    assert [f.name for f in files] == ["a_mesh.obj", "b_tile.xyz"]
+    assert np.array_equal(read_scan(files[0], None, 1), [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    subset = read_scan(files[1], 300, 1)
+    assert len(subset) == 300 and np.array_equal(subset, read_scan(files[1], 300, 1))
+    assert {tuple(p) for p in subset} <= {tuple(p) for p in np.loadtxt(tmp_path / "b_tile.xyz")}
+    assert not np.array_equal(subset, read_scan(files[1], 300, 2))
+    with pytest.raises(InputError, match="fewer than the 10"):
+        read_scan(files[0], None, 1, min_points=10)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no scans here"):
+        scan_files(tmp_path / "empty")
+    with pytest.raises(InputError, match="not a folder of scans"):
+        scan_files(tmp_path / "missing")

@@ -16,7 +16,7 @@ import pytest
 import slurm_cluster
 from browser import open_page
 from kill_anywhere import kill_anywhere, passed
-from scratch import isolated, set_param, sh, smoke_copy, snakemake
+from scratch import SHARED, isolated, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.data import shapes
@@ -94,9 +94,9 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     reports = sorted(p.relative_to(by_snakemake) for p in (by_snakemake / "reports").rglob("*") if p.is_file())
     # csv, tex, per-cloud csv, metrics record of each table, of table_denoise and of table_time; the Kc sweep's
     # plot; the architecture table's csv, tex and layers; paper_comparison's md and tex; the normals, clusters,
-    # denoising and L1/L2 figures' png and pdf, and the training curves of every trained variant; the page, the LaTeX
-    # of every table and its PDF
-    assert len(reports) == 4 * (len(TABLES) + 2) + 1 + 3 + 2 + 2 * 4 + len(PIPELINE.trained) + 3
+    # denoising, L1/L2 and real-scan figures' png and pdf, and the training curves of every trained variant; the
+    # page, the LaTeX of every table and its PDF
+    assert len(reports) == 4 * (len(TABLES) + 2) + 1 + 3 + 2 + 2 * (4 + len(REAL)) + len(PIPELINE.trained) + 3
     timed = set(map(Path, TIMED_FILES))
     for name in reports:
         if name in timed:
@@ -135,7 +135,10 @@ def test_denoising_moves_points_and_measures_the_noisy_input_at_its_noise_level(
     assert (table.to_numpy() > 0).all()
 
 
-PIPELINE = Pipeline(config.read_raw(REPO / "params.yaml"))
+RAW = config.read_raw(REPO / "params.yaml")
+if not SHARED.is_dir():
+    RAW["figures"]["scans"] = None  # as `scratch.link_shared` leaves the copies
+PIPELINE = Pipeline(RAW)
 STEPS = set(PIPELINE.steps)
 #: Steps whose program is missing here: Snakemake's default target skips them, so DVC sees them as not run.
 UNINSTALLED = {name for name, step in PIPELINE.steps.items() if step.needs and not shutil.which(step.needs)}
@@ -149,9 +152,12 @@ RELEASE = {"release"}
 #: table_time names the data, MFPS's, the features', the network's and Kc's settings in its caption.
 TIME = {"table_time"}
 SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
-#: The figures name the data in their footers; the normals figure shows the estimators' normals.
-FIGURES = {"fig_normals", "fig_clusters", "fig_training", "fig_denoise", "fig_loss"}
-NORMALS_FIGURE = {"fig_normals"}
+#: The real-scan figure, where the copies have the shared scans beside them (`scratch.link_shared`): it computes
+#: the baselines', MFPS's, the features' and the network's normals of each scan itself.
+REAL = {"fig_real"} & STEPS
+#: The figures name the data in their footers; the normals figures show the estimators' normals.
+FIGURES = {"fig_normals", "fig_clusters", "fig_training", "fig_denoise", "fig_loss"} | REAL
+NORMALS_FIGURE = {"fig_normals"} | REAL
 #: The page shows every setting, so every params change remakes it.
 REPORT = {"report"}
 
@@ -180,7 +186,8 @@ def family(name: str) -> set[str]:
         ("  sigma: 0.35", "  sigma: 0.3", {"denoise", DENOISE_TABLE, "fig_denoise"} | RELEASE | REPORT),
         ("  n_clusters: 4", "  n_clusters: 3",
          family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"} | REPORT),
-        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device", family("inference") | RELEASE | REPORT),
+        ("  batch_size: 1024\n  device", "  batch_size: 512\n  device",
+         family("inference") | RELEASE | REAL | REPORT),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
         ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}",
          {"training_l1", "table_loss"} | REPORT),
@@ -290,7 +297,7 @@ def test_an_inference_only_change_reruns_inference_and_keeps_the_networks(by_sna
         # which shows every setting) remain
         changed = dvc_changed_stages(by_snakemake)
         assert family("inference") - {"inference"} <= changed <= (
-            family("inference") | TABLES | {"paper_comparison"} | REPORT) - {"inference"} - MAIN_TABLES, changed
+            family("inference") | TABLES | {"paper_comparison"} | REAL | REPORT) - {"inference"} - MAIN_TABLES, changed
     finally:
         set_param(by_snakemake, "  batch_size: 300\n  device", "  batch_size: 1024\n  device")
     snakemake(by_snakemake, "-j2", "main")

@@ -3,20 +3,23 @@ normals colour by their axis whatever their sign, and the figure's files are the
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from refinenet.evaluation.figures import (
     DenoisedColumn,
     Panel,
+    Scan,
     better,
     clusters_figure,
     denoising_figure,
     loss_figure,
     normals_figure,
+    real_figure,
     shaded_surface,
     training_figure,
 )
 from refinenet.evaluation.metrics import unoriented_angles
-from refinenet.evaluation.render import normal_colours, splat, splat_radius, view_rotation
+from refinenet.evaluation.render import normal_colours, scan_view, splat, splat_radius, view_rotation
 
 RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
 
@@ -113,3 +116,29 @@ def test_the_loss_figure_colours_each_point_by_the_better_network(tmp_path):
     winner = better(unoriented_angles(l1, truth), unoriented_angles(l2, truth))
     assert (winner[:300] == -1).all() and (winner[300:] == 1).all()
     assert np.array_equal(better(np.ones(3), np.ones(3)), np.zeros(3))
+
+
+def test_a_range_scan_is_seen_along_its_depth_from_the_scanner_with_z_or_y_up():
+    """A scan of a tilted wall 10 units in front of a scanner at the origin (depth -z): seen from +z (the scanner's
+    side) with y up, as the camera held it; a LiDAR tile of a street (depth along y, z up) keeps z up."""
+    rng = np.random.default_rng(4)
+    wall = np.c_[rng.uniform(-3, 3, 2000), rng.uniform(-2, 2, 2000), np.zeros(2000)]
+    wall[:, 2] = -10.0 + 0.1 * wall[:, 0]
+    rotation = scan_view(wall)
+    assert np.allclose(rotation @ rotation.T, np.eye(3)) and np.linalg.det(rotation) == pytest.approx(1.0)
+    depth = np.array([-0.1, 0.0, 1.0]) / np.linalg.norm([-0.1, 0.0, 1.0])
+    assert rotation[2] @ depth == pytest.approx(1.0)
+    assert rotation[1] @ [0.0, 1.0, 0.0] == pytest.approx(1.0)
+    street = np.c_[rng.uniform(-5, 5, 2000), 100.0 + rng.normal(0, 0.05, 2000), rng.uniform(0, 8, 2000)]
+    rotation = scan_view(street)
+    assert rotation[2] @ [0.0, -1.0, 0.0] == pytest.approx(1.0, abs=1e-3)  # from the origin's side
+    assert rotation[1] @ [0.0, 0.0, 1.0] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_the_real_scan_figure_is_the_same_bytes_on_every_run(tmp_path):
+    rng = np.random.default_rng(5)
+    points = rng.normal(size=(400, 3)) * [3.0, 2.0, 0.2] - [0.0, 0.0, 10.0]
+    normals = np.tile([0.0, 0.0, 1.0], (400, 1))
+    scans = [Scan("wall", points, {"PCA": normals, "Refine-Net (X = 8)": normals + rng.normal(0, 0.1, (400, 3))})]
+    files = drawn_twice(tmp_path, lambda paths: real_figure(scans, "profile test", paths, size=80))
+    assert files[0] == files[1]

@@ -157,3 +157,29 @@ def test_a_table_needs_its_variants():
     del raw["variants"]["l1"]
     with pytest.raises(ParamsError, match="table_loss needs the variant 'l1'"):
         workflow.Pipeline(raw)
+
+
+def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
+    """x8 (X = 8) serves the real-scan figure alone: its features of the training clouds, clusters and networks,
+    no test-cloud features or inference. A variant asked for in the normals figure gets its test-cloud normals and
+    a column; an unknown one is reported under `figures.variants`; without a scans folder there is no fig_real."""
+    assert {"features_x8", "clustering_x8", "training_x8"} <= set(STEPS) and "inference_x8" not in STEPS
+    assert STEPS["features_x8"].outs == ("results/features/x8/train",) and STEPS["features_x8"].split == "train"
+    assert all(t.startswith("results/features/x8/train/") for t in STEPS["features_x8"].targets())
+    assert STEPS["fig_real"].deps == ("../shared/data/scans", "results/clouds/train", "results/clusters/x8",
+                                      "results/models/x8")
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    raw["figures"]["variants"] = ["x8", "l1"]
+    pipeline = workflow.Pipeline(raw)
+    assert "inference_x8" in pipeline.steps
+    assert pipeline.figure_methods()[-2:] == ("refinenet/x8", "refinenet/l1")
+    fig = pipeline.steps["fig_normals"]
+    assert {"results/normals/refinenet/x8/test", "results/normals/refinenet/l1/test"} <= set(fig.deps)
+    assert {"figures.variants", "variants.x8", "variants.l1"} <= set(workflow.tracked_keys(raw, fig))
+    assert workflow.figure_name("refinenet/l1") == "Refine-Net l1"
+    raw["figures"]["variants"] = ["nope"]
+    with pytest.raises(ParamsError, match="figures.variants.*'nope' is not a variant"):
+        workflow.Pipeline(raw)
+    raw["figures"].update(variants=[], scans=None)
+    pipeline = workflow.Pipeline(raw)
+    assert "fig_real" not in pipeline.steps and "real_scans" not in {f.name for f in pipeline.reported()[1]}

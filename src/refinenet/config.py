@@ -393,6 +393,25 @@ class DenoiseConfig:
 
 
 @dataclass(frozen=True)
+class FiguresConfig:
+    """params.yaml `figures`: what the paper's figures show beyond the tables' settings. The defaults show no
+    variant and no scans, so a release exported before this block existed loads."""
+
+    variants: tuple[str, ...] = ()
+    """Refine-Net variants shown as columns of the normals figure after Refine-Net (fig_normals)."""
+    scans: str | None = None
+    """A folder of real scans for fig_real: point files (`data.io.POINT_FILE_SUFFIXES`) or meshes whose vertices
+    are the points; None: no real-scan figure."""
+    scan_points: int | None = None
+    """A seeded random subset of at most this many points per scan (the smoke profile's small figure)."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "variants", tuple(self.variants))
+        if self.scan_points is not None and self.scan_points < 200:
+            raise ValueError(f"scan_points must be at least 200 (a neighbourhood), got {self.scan_points}")
+
+
+@dataclass(frozen=True)
 class Params:
     """Every setting of a run, one block per section of params.yaml (each documented in its dataclass)."""
 
@@ -411,6 +430,7 @@ class Params:
     inference: InferenceConfig
     evaluation: EvaluationConfig
     denoise: DenoiseConfig
+    figures: FiguresConfig
 
     @classmethod
     def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> Params:
@@ -419,7 +439,7 @@ class Params:
         blocks = {"data": DataConfig, "baselines": BaselineConfig, "mfps": MFPSConfig, "features": FeatureConfig,
                   "clustering": ClusteringConfig, "network": NetworkParams, "patches": PatchConfig,
                   "training": TrainConfig, "inference": InferenceConfig, "evaluation": EvaluationConfig,
-                  "denoise": DenoiseConfig}
+                  "denoise": DenoiseConfig, "figures": FiguresConfig}
         typed: dict[str, Any] = {}
         for key, block in blocks.items():
             try:

@@ -1,5 +1,5 @@
 # [P] fig:syn / fig:insight: normals as RGB and angular-error heat maps of chosen test clouds, one column per
-# method (docs/algorithm.md §12, Figures).
+# method and variant of params.yaml `figures.variants` (docs/algorithm.md §12, Figures).
 
 
 rule fig_normals:
@@ -8,7 +8,7 @@ rule fig_normals:
     input:
         code=PIPE.steps["fig_normals"].code,
         clouds=[wf.CLOUD.format(cloud=key) for key in PIPE.figure_keys()],
-        normals=[PIPE.normals_path(m, key) for m in wf.FIGURE_METHODS for key in PIPE.figure_keys()],
+        normals=[PIPE.normals_path(m, key) for m in PIPE.figure_methods() for key in PIPE.figure_keys()],
     output:
         **wf.FIGURE_NORMALS,
     params:
@@ -99,6 +99,38 @@ rule fig_training:
         "../envs/refinenet.yaml"
     shell:
         "python -m stages.fig --figure training 2>&1 | tee {log}"
+
+
+# [P] fig:real_boy / fig:outdoor: normals as RGB on real scans (no ground truth) by PCA, Jet, MFPS and Refine-Net with
+# X = 8, the paper's real-data setting.
+
+if "fig_real" in PIPE.steps:
+
+    rule fig_real:
+        message:
+            "fig_real: normals on the real scans"
+        input:
+            code=PIPE.steps["fig_real"].code,
+            scans=PIPE.full.figures.scans,
+            clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+            clusters=files(wf.REAL_VARIANT, "clustering", wf.CLUSTER_MODEL),
+            networks=[
+                files(wf.REAL_VARIANT, "training", wf.NETWORK, cluster=c)
+                for c in range(PIPE.params[wf.REAL_VARIANT].clustering.n_clusters)
+            ],
+        output:
+            **wf.FIGURE_REAL,
+        params:
+            tracked=tracked("fig_real"),
+        log:
+            "logs/fig/fig_real.log",
+        benchmark:
+            "logs/fig/fig_real.benchmark.tsv"
+        conda:
+            "../envs/refinenet.yaml"
+        shell:
+            "python -m stages.fig --figure real --scans {input.scans} --clouds {input.clouds}"
+            " --clusters {input.clusters} --networks {input.networks} 2>&1 | tee {log}"
 
 
 # [P] fig:block: one test cloud denoised with each method's normals, its points and screened Poisson surfaces.

@@ -188,6 +188,37 @@ def _sample(origin: str, n_points: int, seed: int) -> tuple[np.ndarray, np.ndarr
     return sample_mesh(vertices, faces, n_points, np.random.default_rng(seed))
 
 
+#: Files of a folder of real scans (params.yaml `figures.scans`): point files, and meshes whose vertices are the points.
+SCAN_SUFFIXES = tuple(dict.fromkeys((*POINT_FILE_SUFFIXES, *MESH_SUFFIXES)))
+
+
+def scan_files(folder: str | Path) -> list[Path]:
+    """The scans of a folder, by name."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, "not a folder of scans (params.yaml figures.scans)")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in SCAN_SUFFIXES)
+    if not files:
+        raise InputError(folder, f"no scans here (files ending {', '.join(SCAN_SUFFIXES)})")
+    return files
+
+
+def read_scan(path: str | Path, max_points: int | None, seed: int, min_points: int = 1) -> np.ndarray:
+    """A real scan's points (N, 3): a point file's, or a scanned mesh's vertices (its measured points); a subset
+    of at most `max_points`, seeded by the scan's name."""
+    path = Path(path)
+    if path.suffix.lower() in POINT_FILE_SUFFIXES:
+        points = read_cloud(path, min_points).points
+    else:
+        points = read_mesh(path)[0]
+        if len(points) < min_points:
+            raise InputError(path, f"{len(points)} vertices, fewer than the {min_points} a neighbourhood needs")
+    if max_points is not None and len(points) > max_points:
+        rng = np.random.default_rng(derive_seed(seed, "scan", path.name))
+        points = points[np.sort(rng.choice(len(points), max_points, replace=False))]
+    return points
+
+
 def scored_points(meta: dict[str, Any]) -> np.ndarray | None:
     """The points of a cloud record that the tables score: a test cloud's `.pidx` subset (PCPNet's evaluation
     points), else None for all. Only these need features and a network pass, so a PCPNet shape of 100k points

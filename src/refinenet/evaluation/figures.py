@@ -1,5 +1,6 @@
-"""The paper's figures: normals and error maps (fig:syn, fig:insight), clusters beside the Kc curve (fig:cluster)
-and the training curves. Rendered headless (`render.splat`, matplotlib's Agg) and deterministically: no timestamp
+"""The paper's figures: normals and error maps (fig:syn, fig:insight), normals on real scans (fig:real_boy),
+clusters beside the Kc curve (fig:cluster) and the training curves. Rendered headless (`render.splat`,
+matplotlib's Agg) and deterministically: no timestamp
 or software version is written, so the same inputs give the same PNG and PDF bytes."""
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from matplotlib.ticker import MaxNLocator  # noqa: E402
 from refinenet.atomic import atomic_path  # noqa: E402
 from refinenet.data.meshes import sample_mesh  # noqa: E402
 from refinenet.evaluation.metrics import unoriented_angles  # noqa: E402
-from refinenet.evaluation.render import normal_colours, splat, view_rotation  # noqa: E402
+from refinenet.evaluation.render import normal_colours, scan_view, splat, view_rotation  # noqa: E402
 
 #: The heat map's range in degrees: errors above it saturate.
 MAX_ERROR = 30.0
@@ -67,6 +68,35 @@ def normals_figure(panels: Sequence[Panel], footer: str, paths: Mapping[str, str
                            cax=bottom[-1].inset_axes((0.35, 0.1, 0.12, 0.8)))
         bar.set_label("error (deg)", fontsize=6)
         bar.ax.tick_params(labelsize=6)
+    for ax in axes.ravel():
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_frame_on(False)
+    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    _save(fig, footer, paths)
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One real scan of the real-scan figure: its points and each method's normals (by display name)."""
+
+    name: str
+    points: np.ndarray
+    estimates: Mapping[str, np.ndarray]
+
+
+def real_figure(scans: Sequence[Scan], footer: str, paths: Mapping[str, str | Path], size: int = 300) -> None:
+    """[P] fig:real_boy / fig:outdoor: one row per scan, its normals as RGB under each method (no ground truth to
+    measure against), each seen along its depth axis (`render.scan_view`)."""
+    methods = list(scans[0].estimates)
+    fig, axes = plt.subplots(len(scans), len(methods), figsize=(1.9 * len(methods), 1.9 * len(scans) + 0.4),
+                             dpi=150, squeeze=False)
+    for row, scan in zip(axes, scans, strict=True):
+        rotation = scan_view(scan.points)
+        for ax, (name, normals) in zip(row, scan.estimates.items(), strict=True):
+            ax.imshow(splat(scan.points, normal_colours(normals, rotation), rotation, size))
+            ax.set_title(name, fontsize=7)
+        row[0].set_ylabel(f"{scan.name}\n{len(scan.points):,} points", fontsize=6)
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])

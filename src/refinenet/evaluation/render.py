@@ -22,6 +22,19 @@ def view_rotation(azimuth: float = AZIMUTH, elevation: float = ELEVATION) -> np.
     return np.stack([right, np.cross(towards, right), towards])
 
 
+def scan_view(points: np.ndarray) -> np.ndarray:
+    """A view of a real scan, whose up axis is not known: along its least-spread principal axis (a range scan's
+    depth), from the side of the coordinate origin, where a scanner that records in its own frame stands; up is
+    the first of the world axes z, y, x that is not near that direction (at most two can be)."""
+    centred = points - points.mean(axis=0)
+    _, axes = np.linalg.eigh(centred.T @ centred)
+    towards = axes[:, 0] * (-1.0 if axes[:, 0] @ points.mean(axis=0) > 0 else 1.0)
+    up = next(axis for axis in np.eye(3)[[2, 1, 0]] if abs(axis @ towards) < 0.8)
+    up = up - (up @ towards) * towards
+    up /= np.linalg.norm(up)
+    return np.stack([np.cross(up, towards), up, towards])
+
+
 def facing(normals: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """Unoriented normals flipped to face the viewer, so that normal colours do not depend on their sign."""
     flip = np.where(normals @ rotation[2] < 0, -1.0, 1.0)

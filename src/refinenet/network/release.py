@@ -22,6 +22,7 @@ from refinenet.config import InferenceConfig, Params, PatchConfig
 from refinenet.errors import InputError
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import Features
+from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.inference import refine_normals
 from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, fuse_batch_norm
@@ -47,6 +48,19 @@ class Release:
     def spacing_ratio(self) -> float:
         """Median point spacing / bounding-box diagonal of the training clouds (`geometry.scale`)."""
         return float(self.card["training_data"]["spacing_ratio"])
+
+    @classmethod
+    def of_run(cls, params: Params, cluster_model: ClusterModel, networks: dict[int, RefineNet],
+               training_clouds: Sequence[np.ndarray]) -> Release:
+        """A run's trained networks used as a release without exporting them (e.g. a variant's, for a figure); the
+        card holds only the spacing ratio that `--scale spacing` needs."""
+        card = {"training_data": {"spacing_ratio": training_spacing(training_clouds)}}
+        return cls(params, cluster_model, networks, card)
+
+
+def training_spacing(clouds: Sequence[np.ndarray]) -> float:
+    """The spacing ratio (`geometry.scale.spacing_ratio`) of the training clouds: the median over clouds."""
+    return float(np.median([spacing_ratio(points) for points in clouds]))
 
 
 def half(state: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:

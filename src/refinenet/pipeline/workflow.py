@@ -202,6 +202,12 @@ FIGURE_LOSS = {"png": "reports/figures/l1_against_l2.png", "pdf": "reports/figur
 #: Training loss and validation error per epoch of every cluster, one figure per trained variant.
 FIGURE_TRAINING_DIR = "reports/figures/training"
 FIGURE_TRAINING = f"{FIGURE_TRAINING_DIR}/{{variant}}.png"
+#: [P] fig:real_boy and fig:outdoor: normals as RGB on the real scans of params.yaml `figures.scans` (no truth) by
+#: PCA, Jet, MFPS and Refine-Net in the paper's real-data setting X = 8 (the variant REAL_VARIANT), through the
+#: chain of `refinenet normals` (radii from the point spacing, `cli.estimate`).
+FIGURE_REAL = {"png": "reports/figures/real_scans.png", "pdf": "reports/figures/real_scans.pdf"}
+REAL_VARIANT = "x8"
+REAL_METHODS = (*BASELINES, "mfps", REFINENET)
 
 
 #: [P] §Application (docs/algorithm.md §11): every test cloud with a known clean surface denoised with the normals of
@@ -295,8 +301,9 @@ _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model"
             "features.patches", "evaluation.metrics")
 _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipeline.workflow", "estimators.baselines",
           "estimators.mfps", *_DATA, *_GEOMETRY)
-#: The figure script's (one for the fig steps).
-_FIG = ("evaluation.figures", "evaluation.render", "network.clustering", *_FEATURES, *_TABLE, *_STAGE)
+#: The figure script's (one for the fig steps; the real-scan figure runs the chain of `refinenet normals`).
+_FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geometry.orientation", "cli.estimate",
+        "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK, *_TABLE, *_STAGE)
 
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
 _ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size", "network",
@@ -350,10 +357,19 @@ class Pipeline:
         """Each variant's resolved params (dotted keys apply: `config.get(resolved[v], key)`)."""
         self.params = {v: _typed(v, resolved, source) for v, resolved in self.resolved.items()}
         self.full = self.params[FULL]
-        for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE)]:
+        real = [REAL_VARIANT] if self.full.figures.scans else []
+        for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE),
+                               ("fig_real", real)]:
             for v in variants:
                 if v not in self.params:
                     raise ParamsError("variants", f"{name} needs the variant '{v}', which is not defined", source)
+        for v in self.full.figures.variants:
+            if v not in self.params:
+                raise ParamsError("figures.variants", f"'{v}' is not a variant (variants: {sorted(self.params)})",
+                                  source)
+        self.scored = {v for t in TABLES.values() for v in t.variants} | set(self.full.figures.variants)
+        """The variants whose normals of the test clouds a table or the normals figure shows: only these have
+        test-cloud features and inference (x8 serves the real-scan figure alone)."""
         self.owners = {v: owners(raw, v) for v in self.params}
         self.steps: dict[str, Step] = {s.name: s for s in self._steps()}
 
@@ -404,6 +420,10 @@ class Pipeline:
         keys = self.denoise_keys()
         return next((k for k in self.figure_keys() if k in keys), keys[0])
 
+    def figure_methods(self) -> tuple[str, ...]:
+        """The columns of the normals figure: FIGURE_METHODS, then the variants of params.yaml `figures.variants`."""
+        return tuple(dict.fromkeys((*FIGURE_METHODS, *map(refinenet, self.full.figures.variants))))
+
     def figure_keys(self) -> list[str]:
         """The test clouds of the normals figure: the first of each FIGURE_CATEGORIES category, or (a source
         without them) the first test cloud."""
@@ -423,8 +443,13 @@ class Pipeline:
         figures = [
             FigureEntry("normals_and_errors", **_figure(rel(FIGURE_NORMALS)), caption=(
                 "[P] fig:syn / fig:insight: normals as RGB and unoriented angular-error heat maps of "
-                f"{', '.join(METHOD_NAMES[m] for m in FIGURE_METHODS)} on the first test cloud of "
+                f"{', '.join(map(figure_name, self.figure_methods()))} on the first test cloud of "
                 f"{' and '.join(FIGURE_CATEGORIES)}; each panel's mean error in its title.")),
+            *([FigureEntry("real_scans", **_figure(rel(FIGURE_REAL)), caption=(
+                "[P] fig:real_boy / fig:outdoor: normals as RGB of "
+                f"{', '.join(METHOD_NAMES[m] for m in REAL_METHODS)} (X = 8, variant {REAL_VARIANT}) on the real "
+                f"scans of {self.full.figures.scans} (no ground truth), radii from the point spacing."))]
+              if self.full.figures.scans else []),
             FigureEntry("clusters", **_figure(rel(FIGURE_CLUSTERS)), caption=(
                 "[P] fig:cluster: a test cloud coloured by cluster for "
                 f"{' and '.join(f'variant {v}' for v in CLUSTER_FIGURE_VARIANTS)}, beside the Kc curve.")),
@@ -522,15 +547,18 @@ class Pipeline:
 
     def _variant_steps(self, v: str) -> list[Step]:
         p, own, files = self.params[v], self.owners[v], self._files
+        scored = v in self.scored
+        splits = SPLITS if scored else ("train",)
         name = {family: family if v == FULL else f"{family}_{v}" for family in VARIANT_STEPS}
         keys = {family: keys for family, (keys, _) in VARIANT_STEPS.items()}
         made = {
             "features": lambda: Step(
                 name=name["features"], family="features", modules=(*_FEATURES, *_DATA, *_STAGE), keys=keys["features"],
-                deps=(*(f"results/clouds/{s}" for s in SPLITS),
-                      *(os.path.dirname(self.initial_path(v, f"{s}/x")) for s in SPLITS)),
-                outs=tuple(files("features", v, s) for s in SPLITS), variant=v,
-                targets=lambda: [FEATURES.format(variant=v, cloud=k) for k in self.keys()],
+                deps=(*(f"results/clouds/{s}" for s in splits),
+                      *(os.path.dirname(self.initial_path(v, f"{s}/x")) for s in splits)),
+                outs=tuple(files("features", v, s) for s in splits), variant=v,
+                targets=lambda: [FEATURES.format(variant=v, cloud=k) for s in splits for k in self.keys(s)],
+                split=splits[0] if len(splits) == 1 else None,
             ),
             "clustering": lambda: Step(
                 name=name["clustering"], family="clustering", modules=(*_FEATURES, "network.clustering", *_STAGE),
@@ -553,7 +581,7 @@ class Pipeline:
                 targets=lambda: [REFINED.format(variant=v, cloud=k) for k in self.keys("test")],
             ),
         }
-        return [make() for family, make in made.items() if own[family] == v]
+        return [make() for family, make in made.items() if own[family] == v and (family != "inference" or scored)]
 
     def _table_step(self, name: str, table: Table) -> Step:
         blocks = _blocks(table.methods)
@@ -573,6 +601,21 @@ class Pipeline:
         tables, figures = self.reported()
         files = [os.path.join(REPORT_DIR, p) for entry in (*tables, *figures) for p in entry.links.values()]
         return list(dict.fromkeys([*files, COMPARISON_FILES["md"]]))
+
+    def _real_steps(self) -> list[Step]:
+        """The real-scan figure, where params.yaml `figures.scans` names a folder."""
+        scans = self.full.figures.scans
+        if not scans:
+            return []
+        return [Step(
+            name="fig_real", family="fig",
+            modules=_FIG,
+            keys=("data.source", "data.path", "data.n_points", "figures.scans", "figures.scan_points", "baselines",
+                  "mfps", "features", "network", "patches", "inference", "seed"), variant=REAL_VARIANT,
+            deps=(scans, "results/clouds/train", self._files("clustering", REAL_VARIANT, ""),
+                  self._files("training", REAL_VARIANT, "")),
+            outs=tuple(FIGURE_REAL.values()), targets=lambda: list(FIGURE_REAL.values()),
+        )]
 
     def _denoise_steps(self) -> list[Step]:
         """The denoising application's steps, where some test cloud has a known clean surface."""
@@ -597,7 +640,7 @@ class Pipeline:
                 targets=lambda: list(table.values()),
             ),
             Step(
-                name="fig_denoise", family="fig", modules=(*_FIG, "evaluation.denoise", "geometry.orientation"),
+                name="fig_denoise", family="fig", modules=_FIG,
                 keys=("data.source", "data.path", "data.n_points", "denoise"),
                 deps=("results/clouds/test", records),
                 outs=tuple(FIGURE_DENOISE.values()), targets=lambda: list(FIGURE_DENOISE.values()),
@@ -648,9 +691,9 @@ class Pipeline:
             ),
             Step(
                 name="fig_normals", family="fig", modules=_FIG,
-                keys=("data.source", "data.path", "data.n_points",
-                      *_blocks(FIGURE_METHODS)),
-                deps=("results/clouds/test", *dict.fromkeys(map(self.normals_dir, FIGURE_METHODS))),
+                keys=("data.source", "data.path", "data.n_points", "figures.variants", *_blocks(self.figure_methods()),
+                      *(f"variants.{v}" for v in self.full.figures.variants if _exists(self.raw, f"variants.{v}"))),
+                deps=("results/clouds/test", *dict.fromkeys(map(self.normals_dir, self.figure_methods()))),
                 outs=tuple(FIGURE_NORMALS.values()), targets=lambda: list(FIGURE_NORMALS.values()),
             ),
             Step(
@@ -674,6 +717,7 @@ class Pipeline:
                 outs=(FIGURE_TRAINING_DIR,),
                 targets=lambda: [FIGURE_TRAINING.format(variant=v) for v in self.trained],
             ),
+            *self._real_steps(),
             *self._denoise_steps(),
             Step(
                 name="report", family="report", modules=("evaluation.report", *_TABLE, *_STAGE),
@@ -695,6 +739,12 @@ class Pipeline:
                 deps=(), outs=tuple(ARCHITECTURE_FILES.values()), targets=lambda: list(ARCHITECTURE_FILES.values()),
             ),
         ]
+
+
+def figure_name(method: str) -> str:
+    """A method's name in figures: its table name, or `Refine-Net <variant>` for a variant."""
+    variant = variant_of(method)
+    return METHOD_NAMES[method] if variant in (None, FULL) else f"{METHOD_NAMES[REFINENET]} {variant}"
 
 
 def _figure(files: dict[str, str]) -> dict[str, Any]:
