@@ -16,7 +16,7 @@ import pytest
 import slurm_cluster
 from browser import open_page
 from kill_anywhere import kill_anywhere, passed
-from scratch import SHARED, isolated, set_param, sh, smoke_copy, snakemake
+from scratch import SHARED, isolated, link_shared, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.data import shapes
@@ -255,6 +255,8 @@ def test_a_run_pushed_to_a_shared_cache_and_pulled_into_a_fresh_clone_leaves_bot
     sh(by_dvc, "git", "-c", "user.name=test", "-c", "user.email=test@example.org", "commit", "-qm", "a finished run")
     clone = tmp_path / "clone"
     sh(tmp_path, "git", "clone", "-q", str(by_dvc), str(clone))
+    if SHARED.is_dir():
+        link_shared(clone)  # the real-scan figure's scans, beside the clone as beside the run
     assert not (clone / "results").exists()
     sh(clone, "dvc", "pull", "--quiet")
     sh(clone, sys.executable, "-m", "refinenet.pipeline.bridge", "sync")
