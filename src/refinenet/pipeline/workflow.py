@@ -722,7 +722,7 @@ class Pipeline:
             Step(
                 name="report", family="report", modules=("evaluation.report", *_TABLE, *_STAGE),
                 keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
-                      "training", "inference", "evaluation", "denoise", "variants"),
+                      "training", "inference", "evaluation", "denoise", "figures", "variants"),
                 deps=tuple(dict.fromkeys(FIGURE_TRAINING_DIR if p.startswith(f"{FIGURE_TRAINING_DIR}/") else p
                                          for p in self.reported_files())),
                 outs=tuple(REPORT_FILES.values()),
