@@ -20,7 +20,7 @@ import numpy as np
 
 from refinenet.config import DataConfig, NoiseConfig
 from refinenet.data import shapes
-from refinenet.data.io import POINT_FILE_SUFFIXES, Cloud, read_cloud
+from refinenet.data.io import POINT_FILE_SUFFIXES, Cloud, check_array, read_cloud
 from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
 from refinenet.data.noise import add_gaussian_noise, bbox_diagonal, derive_seed
 from refinenet.errors import InputError, ParamsError
@@ -210,9 +210,7 @@ def read_scan(path: str | Path, max_points: int | None, seed: int, min_points: i
     if path.suffix.lower() in POINT_FILE_SUFFIXES:
         points = read_cloud(path, min_points).points
     else:
-        points = read_mesh(path)[0]
-        if len(points) < min_points:
-            raise InputError(path, f"{len(points)} vertices, fewer than the {min_points} a neighbourhood needs")
+        points = check_array(path, read_mesh(path)[0], "vertices", min_points)
     if max_points is not None and len(points) > max_points:
         rng = np.random.default_rng(derive_seed(seed, "scan", path.name))
         points = points[np.sort(rng.choice(len(points), max_points, replace=False))]
