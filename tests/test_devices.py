@@ -9,7 +9,7 @@ import sys
 import pytest
 import torch
 
-from refinenet.network.devices import claim_gpu, resolve_device
+from refinenet.network.devices import claim_gpu, resolve_device, resolve_precision
 
 CLAIM = "import sys; from refinenet.network.devices import claim_gpu; print(claim_gpu(3, sys.argv[1], wait=False))"
 
@@ -40,3 +40,10 @@ def test_device_names_resolve():
         assert resolve_device("auto") == torch.device("cpu")
         with pytest.raises(ValueError, match="torch sees no CUDA device"):
             resolve_device("cuda")
+
+
+def test_precision_names_resolve():
+    assert resolve_precision("float32", torch.device("cpu")) == "float32"
+    assert resolve_precision("bfloat16", torch.device("cpu")) == "bfloat16"
+    assert resolve_precision("auto", torch.device("cuda")) == "float32"
+    assert resolve_precision("auto", torch.device("cpu")) in ("float32", "bfloat16")

@@ -18,6 +18,7 @@ from refinenet.network.model import (
     fuse_batch_norm,
     preset,
     quaternion_to_matrix,
+    reduced_precision,
 )
 
 VARIANTS = [(f, c) for f in FEATURES for c in CONNECTIONS if f != "normals" or c == "weight"]
@@ -146,6 +147,25 @@ def test_fused_copy_for_inference_gives_the_same_normals():
     with torch.no_grad():
         torch.testing.assert_close(fused(*inputs), model(*inputs), rtol=0, atol=1e-5)
     assert count_parameters(model) == 2_648_131  # the original is left as it was
+
+
+def test_reduced_precision_copy_computes_the_feature_convolutions_in_bfloat16():
+    torch.manual_seed(0)
+    model = RefineNet(preset("release")).eval()
+    reduced = reduced_precision(model, "bfloat16")
+    dtypes = {name: p.dtype for name, p in reduced.named_parameters()}
+    low = {name for name, dtype in dtypes.items() if dtype == torch.bfloat16}
+    assert low and all(name.startswith(("point_module.mlp.", "height_map_module.")) for name in low)
+    assert dtypes["height_map_module.0.weight"] == torch.bfloat16  # first convolution
+    assert dtypes[f"height_map_module.{reduced.height_map_module.n_convolutional + 1}.weight"] == torch.float32
+    assert all(p.dtype == torch.float32 for p in model.parameters())  # the original is left as it was
+    assert reduced_precision(model, "float32") is model
+    inputs = _inputs(model.config, 64)
+    with torch.no_grad():
+        angles = torch.rad2deg(torch.arccos((reduced(*inputs) * model(*inputs)).sum(1).clamp(-1, 1)))
+    assert reduced(*inputs).dtype == torch.float32 and angles.max() < 1.0, angles.max()
+    with pytest.raises(ValueError, match="precision 'float16'"):
+        reduced_precision(model, "float16")
 
 
 def test_weight_matrix_connection_computes_th_tp_v():

@@ -54,6 +54,10 @@ def parser() -> argparse.ArgumentParser:
                               "the bounding-box diagonal (the paper's, for whole objects)")
     normals.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
                          help="where the networks run (auto: CUDA when present)")
+    normals.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
+                         help="of the networks' point MLP and height-map convolutions (auto: bfloat16 on a CPU that "
+                              "computes it natively, about 1.5x faster, normals within 0.01 deg on average; else "
+                              "float32, the pipeline's)")
     normals.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)),
                          help="CPU threads (default: every core this process may use)")
     normals.add_argument("--tile-points", type=int, default=None,
@@ -128,7 +132,7 @@ def normals(args: argparse.Namespace) -> int:
     )
     from refinenet.errors import InputError, OutputError
     from refinenet.geometry.orientation import orient_mst, orient_viewpoint
-    from refinenet.network.devices import resolve_device
+    from refinenet.network.devices import resolve_device, resolve_precision
 
     start = time.perf_counter()
     torch.set_num_threads(args.threads)
@@ -143,15 +147,17 @@ def normals(args: argparse.Namespace) -> int:
     if args.tile_points is not None and args.tile_points < 1:
         raise InputError("--tile-points", f"must be at least 1, got {args.tile_points}")
     try:
-        device = str(resolve_device(args.device))
+        device = resolve_device(args.device)
     except ValueError as err:
         raise InputError("--device", str(err)) from None
+    precision = resolve_precision(args.precision, device)
+    device = str(device)
     release = _release(args, device, with_networks=args.method == "refinenet")
     cloud = read_cloud(args.input, min_points=min_points(release.params, args.method, args.initial is not None))
     initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
     progress = sys.stderr.isatty()
     result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
-                              args.tile_points or TILE_POINTS, args.threads, progress)
+                              args.tile_points or TILE_POINTS, args.threads, progress, precision)
     if args.orient == "mst":
         result = orient_mst(cloud.points, result)
     elif args.orient == "viewpoint":

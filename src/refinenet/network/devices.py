@@ -1,4 +1,4 @@
-"""The device a training or inference job runs on.
+"""The device a training or inference job runs on, and the precision inference computes in there.
 
 `auto` is cuda when torch sees a GPU, else cpu. On a machine with several GPUs, concurrent jobs must not all land
 on the first one: each job claims a GPU that no other job of this machine holds (an exclusive lock on a file per
@@ -35,6 +35,16 @@ def resolve_device(device: str) -> torch.device:
     if device == "cuda" and torch.cuda.device_count() > 1:
         return torch.device("cuda", claim_gpu(torch.cuda.device_count()))
     return torch.device(device)
+
+
+def resolve_precision(precision: str, device: torch.device) -> str:
+    """auto -> bfloat16 on a CPU that computes it natively (oneDNN's check: AVX512-BF16 or AMX), else float32: on
+    other CPUs bfloat16 is emulated and slower, and a GPU is fast enough in float32 (`model.reduced_precision`)."""
+    if precision != "auto":
+        return precision
+    native = device.type == "cpu" and torch.backends.mkldnn.is_available() \
+        and torch.ops.mkldnn._is_mkldnn_bf16_supported()
+    return "bfloat16" if native else "float32"
 
 
 def lock_folder() -> Path:
