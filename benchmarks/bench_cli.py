@@ -5,7 +5,8 @@ Each cloud is the procedural fandisk (a CAD shape with sharp edges, a test-split
 saw) sampled at N points with 0.1% Gaussian noise of the bounding-box diagonal, written as binary .ply. Both
 commands run as whole processes under /usr/bin/time -v (start-up, reading and writing included):
 
-* ours: `refinenet normals cloud.ply -o out.ply --threads T` (defaults: MFPS + Refine-Net, MST orientation);
+* ours: `refinenet normals cloud.ply -o out.ply --threads T` (defaults: MFPS + Refine-Net, MST orientation,
+  bfloat16 feature convolutions where the CPU has them natively), and again with `--precision float32`;
 * reference: a Python process that reads the cloud with Open3D, calls `estimate_normals()` (its default: PCA of
   the 30 nearest neighbours, unoriented) and writes the result.
 
@@ -28,6 +29,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 from machine import machine_info
 
 from refinenet.atomic import write_text
@@ -35,6 +37,7 @@ from refinenet.data.io import read_cloud, write_ply
 from refinenet.data.noise import add_gaussian_noise
 from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.network.devices import resolve_precision
 
 RESULTS = Path(__file__).parent / "results"
 SHAPE, NOISE = "fandisk_a", 0.1
@@ -50,8 +53,6 @@ TARGETS = {100_000: (60, None), 1_000_000: (600, 4.0), 10_000_000: (None, 8.0)}
 def gemm_gflops(threads: int) -> float:
     """The machine's speed now: the best of 3 float32 matrix products (102400 x 128 by 128 x 1024, the shape of
     the network's largest layer) on `threads` threads. The CPU is shared, so timings are read against it."""
-    import torch
-
     torch.set_num_threads(threads)
     a, b = torch.randn(102_400, 128), torch.randn(128, 1024)
     best = min(_seconds(lambda: a @ b) for _ in range(3))
@@ -81,12 +82,15 @@ def case(n: int, threads: int, folder: Path) -> dict:
     points = add_gaussian_noise(points, NOISE, seed=12)
     source, ours, reference = folder / "cloud.ply", folder / "ours.ply", folder / "open3d.ply"
     write_ply(source, points)
-    refinenet = str(Path(sys.executable).with_name("refinenet"))
+    ours_float32 = folder / "ours_float32.ply"
+    command = [str(Path(sys.executable).with_name("refinenet")), "normals", str(source), "--threads", str(threads)]
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,
               "machine": machine_info(gemm_gflops_start=gemm_gflops(threads)),
-              "ours": timed([refinenet, "normals", str(source), "-o", str(ours), "--threads", str(threads)]),
+              "precision": resolve_precision("auto", torch.device("cpu")),
+              "ours": timed([*command, "-o", str(ours)]),
+              "ours_float32": timed([*command, "-o", str(ours_float32), "--precision", "float32"]),
               "open3d": timed([sys.executable, "-c", OPEN3D, str(source), str(reference)])}
-    for name, path in (("ours", ours), ("open3d", reference)):
+    for name, path in (("ours", ours), ("ours_float32", ours_float32), ("open3d", reference)):
         normals = read_cloud(path).normals
         angles = unoriented_angles(normals, truth)
         result[name].update(mean_deg=float(angles.mean()), rmse_deg=float(np.sqrt((angles ** 2).mean())),
@@ -105,16 +109,18 @@ def _gemm(case: dict) -> str:
 def report(cases: dict[str, dict]) -> str:
     rows = []
     for c in sorted(cases.values(), key=lambda c: c["points"]):
-        o, r = c["ours"], c["open3d"]
+        o, f, r = c["ours"], c.get("ours_float32"), c["open3d"]
         wall_target, memory_target = TARGETS.get(c["points"], (None, None))
         verdicts = []
         if wall_target:
             verdicts.append(f"wall <= {wall_target} s: {'met' if o['wall_s'] <= wall_target else 'NOT met'}")
         if memory_target:
             verdicts.append(f"peak <= {memory_target} GB: {'met' if o['peak_gb'] <= memory_target else 'NOT met'}")
-        rows.append(f"| {c['points']:,} | {o['wall_s']:.1f} | {o['cpu_s']:.1f} | {o['peak_gb']:.2f} | "
+        float32 = "not run" if f is None else f"{f['wall_s']:.1f} s, {f['mean_deg']:.3f} / {f['rmse_deg']:.3f}"
+        rows.append(f"| {c['points']:,} | {c.get('precision', 'float32')} | {o['wall_s']:.1f} | {o['cpu_s']:.1f} | "
+                    f"{o['peak_gb']:.2f} | {float32} | "
                     f"{r['wall_s']:.1f} | {r['peak_gb']:.2f} | {o['wall_s'] / r['wall_s']:.1f} | "
-                    f"{o['mean_deg']:.2f} / {o['rmse_deg']:.2f} | {r['mean_deg']:.2f} / {r['rmse_deg']:.2f} | "
+                    f"{o['mean_deg']:.3f} / {o['rmse_deg']:.3f} | {r['mean_deg']:.2f} / {r['rmse_deg']:.2f} | "
                     f"{o['outward']:.4f} | {c['machine']['load_average_1min']:.1f}, {c['load_average_end']:.1f} | "
                     f"{_gemm(c)} | "
                     f"{'; '.join(verdicts)} |")
@@ -124,17 +130,19 @@ def report(cases: dict[str, dict]) -> str:
         "",
         f"Procedural {SHAPE} (a CAD shape with sharp edges, never trained on) with {NOISE}% Gaussian noise, binary "
         ".ply in and out. *ours*: `refinenet normals cloud.ply -o out.ply` with its defaults (MFPS + the shipped "
-        "Refine-Net networks, MST orientation); *Open3D*: read, `estimate_normals()` (PCA of 30 neighbours, "
-        "unoriented), write, in the same run. Whole processes under `/usr/bin/time -v`. Generated by "
+        "Refine-Net networks, MST orientation, `--precision auto`: the *precision* column, bfloat16 point MLP and "
+        "height-map convolutions on a CPU with native bfloat16); *float32*: the same with `--precision float32`, "
+        "the pipeline's precision (wall time, then mean / RMSE); *Open3D*: read, `estimate_normals()` (PCA of 30 "
+        "neighbours, unoriented), write, in the same run. Whole processes under `/usr/bin/time -v`. Generated by "
         "`benchmarks/bench_cli.py`.",
         "",
         f"Machine: {machine['cpu']}, {machine['cores']} cores, {machine['memory_gb']} GB, Python "
         f"{machine['python']}.",
         "",
-        "| points | ours wall (s) | ours CPU (s) | ours peak (GB) | Open3D wall (s) | Open3D peak (GB) | wall ratio "
-        "| ours mean / RMSE (deg) | Open3D mean / RMSE (deg) | ours outward | load start, end | GEMM GFLOP/s start, "
-        "end | targets |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| points | precision | ours wall (s) | ours CPU (s) | ours peak (GB) | float32 wall, mean / RMSE (deg) "
+        "| Open3D wall (s) | Open3D peak (GB) | wall ratio | ours mean / RMSE (deg) | Open3D mean / RMSE (deg) "
+        "| ours outward | load start, end | GEMM GFLOP/s start, end | targets |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         "Errors are unoriented angles to the true normals; *outward* is the fraction of our oriented normals on the "

@@ -56,7 +56,7 @@ def parser() -> argparse.ArgumentParser:
                          help="where the networks run (auto: CUDA when present)")
     normals.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
                          help="of the networks' point MLP and height-map convolutions (auto: bfloat16 on a CPU that "
-                              "computes it natively, about 1.5x faster, normals within 0.01 deg on average; else "
+                              "computes it natively: about 1.5x faster, the mean error within 0.01 deg; else "
                               "float32, the pipeline's)")
     normals.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)),
                          help="CPU threads (default: every core this process may use)")
@@ -163,7 +163,8 @@ def normals(args: argparse.Namespace) -> int:
     elif args.orient == "viewpoint":
         result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
     write_points(output, cloud.points, result)
-    print(f"{output}: {len(cloud):,} points, {args.method} normals ({args.orient} orientation) in "
+    how = f"{precision} features, " if args.method == "refinenet" else ""
+    print(f"{output}: {len(cloud):,} points, {args.method} normals ({how}{args.orient} orientation) in "
           f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
     return 0
 
