@@ -46,6 +46,16 @@ def test_separate_parts_are_each_oriented():
     assert outward_fraction(oriented, outward) >= 0.99
 
 
+def test_many_parts_are_each_oriented_in_one_walk():
+    """A scan's many separate clusters (here 200 small spheres on a line, each its own part of the graph): every
+    one outward, at once rather than one graph walk per part."""
+    spheres = [sample_shape("sphere_a", 300, seed=s) for s in range(200)]
+    points = np.concatenate([p + [3.0 * i, 0, 0] for i, (p, _) in enumerate(spheres)])
+    outward = np.concatenate([n for _, n in spheres])
+    oriented = orient_mst(points, scrambled(outward, 6))
+    assert outward_fraction(oriented, outward) >= 0.99
+
+
 def test_viewpoint_faces_the_sensor():
     points, _ = sample_shape("sphere_a", 3000, seed=1)
     viewpoint = np.array([0.0, 0.0, 10.0])

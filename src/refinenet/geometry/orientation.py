@@ -47,17 +47,17 @@ def orient_mst(points: np.ndarray, normals: np.ndarray, k: int = MST_K) -> np.nd
     del cost, cols
     tree = minimum_spanning_tree(graph)
     del graph
-    tree = tree + tree.T
     n_parts, part = connected_components(tree, directed=False)
-    oriented = normals.copy()
-    for p in range(n_parts):
-        members = np.flatnonzero(part == p)
-        root = members[np.argmax(points[members, 2])]
-        if oriented[root, 2] < 0:
-            oriented[root] = -oriented[root]
-        order, parent = breadth_first_order(tree, root, directed=False, return_predecessors=True)
-        _propagate(oriented, order, parent)
-    return oriented
+    # One walk for all parts (a scan can have thousands): from an extra node n with normal +z, linked to each
+    # part's highest point, so that the propagation itself turns every root upwards.
+    by_height = np.lexsort((-points[:, 2], part))
+    roots = by_height[np.searchsorted(part[by_height], np.arange(n_parts))]
+    tree.resize((n + 1, n + 1))
+    tree = tree + csr_matrix((np.ones(n_parts), (np.full(n_parts, n), roots)), shape=(n + 1, n + 1))
+    oriented = np.vstack([normals, [0.0, 0.0, 1.0]])
+    order, parent = breadth_first_order(tree, n, directed=False, return_predecessors=True)
+    _propagate(oriented, order, parent)
+    return oriented[:n]
 
 
 @numba.njit(cache=True)
