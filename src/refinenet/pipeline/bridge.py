@@ -4,8 +4,8 @@
   (`--allowed-rules STEP`, so upstream outputs are never touched) after removing orphan files from the
   step's output folders, so DVC records what the current params produce and nothing else.
 * `record`: after a plain Snakemake run, write every finished, up-to-date step into dvc.lock
-  (`dvc commit`), so `dvc repro` has nothing to redo. The Snakefile calls it on success. One
-  `snakemake --summary` tells which steps are up to date.
+  (`dvc commit --force`, with one write of dvc.lock), so `dvc repro` has nothing to redo. The Snakefile calls it
+  on success. One `snakemake --summary` tells which steps are up to date.
 * `sync`: after `dvc checkout`/`dvc pull`/`git checkout`, when `dvc status` is clean, mark the restored
   files up to date for Snakemake (`snakemake --touch`).
 """
@@ -95,9 +95,27 @@ def record() -> int:
             prune(step, targets)
             finished.append(step.name)
     if finished:
-        subprocess.run(["dvc", "commit", "--force", "--quiet", *finished], check=True)
+        commit(finished)
         print(f"recorded in dvc.lock: {', '.join(finished)}")
     return 0
+
+
+def commit(names: list[str]) -> None:
+    """`dvc commit --force` of the named stages, writing dvc.lock once.
+
+    The command line takes its targets one at a time and rewrites dvc.lock after each: with the full set's 400 KB
+    lock file that is about 4 s per stage, over 3 minutes for the 51 stages a smoke run finishes. This is the same
+    per-stage save and commit (`dvc.repo.commit.commit`) with a single write.
+    """
+    from dvc.repo import Repo
+
+    with Repo() as repo, repo.lock:
+        stages = {stage.name: stage for stage in repo.index.stages}
+        chosen = [stages[name] for name in names]
+        for stage in chosen:
+            stage.save()
+            stage.commit()
+        chosen[0].dvcfile.dump_stages(chosen, update_pipeline=False)
 
 
 def sync() -> int:
