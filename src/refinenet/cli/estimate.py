@@ -50,13 +50,11 @@ def min_points(params: Params, method: str, refine_initial: bool) -> int:
 
 def estimate_normals(points: np.ndarray, release: Release, method: str = "refinenet",
                      initial: np.ndarray | None = None, scale: str = "spacing", device: str = "auto",
-                     tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False,
-                     precision: str = "float32") -> np.ndarray:
+                     tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False) -> np.ndarray:
     """Unit, unoriented normals (N, 3) of a cloud by `method`, with the release's settings (and networks).
 
     `initial` (N, 3) replaces MFPS as the normals Refine-Net refines. `scale` picks l_d: the point spacing
-    calibrated on the training clouds, or the paper's bounding-box diagonal. `precision` is that of the
-    networks' feature modules (`inference.refine_normals`).
+    calibrated on the training clouds, or the paper's bounding-box diagonal.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
@@ -87,7 +85,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
         features = compute_features(sub, start, params.features, inner, length=length, centres=rows,
                                     workers=workers)
         normals[tile.own] = refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
-                                           inference, progress=inner, length=length, precision=precision)
+                                           inference, progress=inner, length=length)
     return normals
 
 

@@ -103,10 +103,10 @@ def _fail(message: str) -> int:
     return EXIT_BAD_INPUT
 
 
-def _release(args: argparse.Namespace, device: str = "cpu", with_networks: bool = True):
+def _release(args: argparse.Namespace, device: str = "cpu", with_networks: bool = True, precision: str = "float32"):
     from refinenet.network.release import SHIPPED, load_release
 
-    return load_release(args.release or SHIPPED, device=device, with_networks=with_networks)
+    return load_release(args.release or SHIPPED, device=device, with_networks=with_networks, precision=precision)
 
 
 def info(args: argparse.Namespace) -> int:
@@ -152,12 +152,12 @@ def normals(args: argparse.Namespace) -> int:
         raise InputError("--device", str(err)) from None
     precision = resolve_precision(args.precision, device)
     device = str(device)
-    release = _release(args, device, with_networks=args.method == "refinenet")
+    release = _release(args, device, with_networks=args.method == "refinenet", precision=precision)
     cloud = read_cloud(args.input, min_points=min_points(release.params, args.method, args.initial is not None))
     initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
     progress = sys.stderr.isatty()
     result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
-                              args.tile_points or TILE_POINTS, args.threads, progress, precision)
+                              args.tile_points or TILE_POINTS, args.threads, progress)
     if args.orient == "mst":
         result = orient_mst(cloud.points, result)
     elif args.orient == "viewpoint":

@@ -109,13 +109,12 @@ def _maps(points, keys, dims, origin, grid_cell, centres, reach, inverse_cell2, 
     half = m // 2
     sum_w = np.empty((n_maps, m, m))
     sum_wz = np.empty((n_maps, m, m))
+    low, high = np.empty(3, np.int64), np.empty(3, np.int64)
     for row in range(len(centres)):
         sum_w[:] = 0.0
         sum_wz[:] = 0.0
         p = points[centres[row]]
         r = reach[row]
-        low = np.empty(3, np.int64)
-        high = np.empty(3, np.int64)
         for a in range(3):
             low[a] = max(int((p[a] - r - origin[a]) / grid_cell), 0)
             high[a] = min(int((p[a] + r - origin[a]) / grid_cell), dims[a] - 1)

@@ -20,20 +20,19 @@ from refinenet.geometry.frames import to_world
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.dataset import make_inputs, prepare
 from refinenet.network.devices import resolve_device
-from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm, reduced_precision
+from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
 
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,
                    networks: Mapping[int, RefineNet], patch: PatchConfig, config: InferenceConfig, seed: int = 0,
-                   progress: bool = False, length: float | None = None, precision: str = "float32") -> np.ndarray:
+                   progress: bool = False, length: float | None = None) -> np.ndarray:
     """(M, 3) float32 unit normals in the world frame, one per feature row (of the point `features.points` names).
 
     Each point goes through the network of its cluster (`networks` maps cluster id -> network, which is moved to
     `device` and put in eval mode); a cluster without a network (trained as empty) keeps the first normal of nf.
     `patch` must match the training patches; `seed` draws the ball-mode subsets. `length` is the l_d of ball
-    patches (`dataset.PreparedCloud`). `precision` is that of the feature modules' convolutional parts
-    (`model.reduced_precision`); the pipeline keeps float32, so that its tables do not depend on the CPU.
+    patches (`dataset.PreparedCloud`).
     """
     device, batch_size = resolve_device(config.device), config.batch_size
     if batch_size < 1:
@@ -49,7 +48,7 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
                disable=not progress)
     with bar, torch.inference_mode():
         for c, index in members.items():
-            net = reduced_precision(networks[c], precision).to(device).eval()
+            net = networks[c].to(device).eval()
             for start in range(0, len(index), batch_size):
                 batch = index[start:start + batch_size]
                 inputs = make_inputs(cloud, batch, patch, net.config, rng)

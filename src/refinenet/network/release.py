@@ -25,7 +25,7 @@ from refinenet.features.cache import Features
 from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.inference import refine_normals
-from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, fuse_batch_norm
+from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, fuse_batch_norm, reduced_precision
 from refinenet.network.training import network_fingerprint
 
 #: Where the package keeps its shipped release (the pipeline's `release` step writes it).
@@ -92,9 +92,10 @@ def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterM
 
 
 def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu", fuse: bool = True,
-                 with_networks: bool = True) -> Release:
-    """The release in `folder` (default: the shipped one), networks in float32 and eval mode on `device`
-    (none without `with_networks`: the settings alone serve the estimators that need no network)."""
+                 with_networks: bool = True, precision: str = "float32") -> Release:
+    """The release in `folder` (default: the shipped one), networks in eval mode on `device` (none without
+    `with_networks`: the settings alone serve the estimators that need no network). `precision` is that of the
+    networks' feature modules (`model.reduced_precision`); the rest computes in float32."""
     folder = Path(folder)
     path = folder / BUNDLE
     if not path.is_file():
@@ -117,7 +118,7 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
         net = RefineNet(network)
         net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
         net = net.to(device).eval()
-        networks[int(c)] = fuse_batch_norm(net) if fuse else net
+        networks[int(c)] = reduced_precision(fuse_batch_norm(net) if fuse else net, precision)
     return Release(params, cluster_model, networks, card)
 
 

@@ -105,7 +105,7 @@ def commit(names: list[str]) -> None:
 
     The command line takes its targets one at a time and rewrites dvc.lock after each: with the full set's 400 KB
     lock file that is about 4 s per stage, over 3 minutes for the 51 stages a smoke run finishes. This is the same
-    per-stage save and commit (`dvc.repo.commit.commit`) with a single write.
+    per-stage save and commit (`dvc.repo.commit.commit`) with a single write (every stage is in dvc.yaml).
     """
     from dvc.repo import Repo
 
