@@ -38,6 +38,7 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_precision
+from refinenet.network.release import CARD_JSON, SHIPPED
 
 RESULTS = Path(__file__).parent / "results"
 SHAPE, NOISE = "fandisk_a", 0.1
@@ -87,6 +88,7 @@ def case(n: int, threads: int, folder: Path) -> dict:
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,
               "machine": machine_info(gemm_gflops_start=gemm_gflops(threads)),
               "precision": resolve_precision("auto", torch.device("cpu")),
+              "networks": json.loads((SHIPPED / CARD_JSON).read_text())["params_fingerprint"],
               "ours": timed([*command, "-o", str(ours)]),
               "ours_float32": timed([*command, "-o", str(ours_float32), "--precision", "float32"]),
               "open3d": timed([sys.executable, "-c", OPEN3D, str(source), str(reference)])}
@@ -122,7 +124,7 @@ def report(cases: dict[str, dict]) -> str:
                     f"{r['wall_s']:.1f} | {r['peak_gb']:.2f} | {o['wall_s'] / r['wall_s']:.1f} | "
                     f"{o['mean_deg']:.3f} / {o['rmse_deg']:.3f} | {r['mean_deg']:.2f} / {r['rmse_deg']:.2f} | "
                     f"{o['outward']:.4f} | {c['machine']['load_average_1min']:.1f}, {c['load_average_end']:.1f} | "
-                    f"{_gemm(c)} | "
+                    f"{_gemm(c)} | {c.get('networks', 'not recorded')} | "
                     f"{'; '.join(verdicts)} |")
     machine = next(iter(cases.values()))["machine"]
     return "\n".join([
@@ -141,13 +143,14 @@ def report(cases: dict[str, dict]) -> str:
         "",
         "| points | precision | ours wall (s) | ours CPU (s) | ours peak (GB) | float32 wall, mean / RMSE (deg) "
         "| Open3D wall (s) | Open3D peak (GB) | wall ratio | ours mean / RMSE (deg) | Open3D mean / RMSE (deg) "
-        "| ours outward | load start, end | GEMM GFLOP/s start, end | targets |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| ours outward | load start, end | GEMM GFLOP/s start, end | networks | targets |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         "Errors are unoriented angles to the true normals; *outward* is the fraction of our oriented normals on the "
         "outer side (Open3D's are unoriented). A load average above 2 at the start means another job shared the "
-        "cores. The GEMM column is the machine's speed at the time (`gemm_gflops`); the same machine has measured "
+        "cores. *Networks* is the params fingerprint of the shipped release that ran (its model card). The GEMM "
+        "column is the machine's speed at the time (`gemm_gflops`); the same machine has measured "
         "from about 60 to about 200 GFLOP/s on different days, and the network's time follows it.",
         "",
     ])

@@ -21,7 +21,10 @@ from refinenet.network.training import (
     EMPTY,
     HISTORY,
     HISTORY_COLUMNS,
+    RESULT,
     cluster_data,
+    input_angles,
+    learning_rate,
     train_cluster,
 )
 
@@ -47,10 +50,12 @@ def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
     assert torch.load(tmp_path / BEST, weights_only=True)["epoch"] == result.best_epoch
 
 
-def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
+@pytest.mark.parametrize("schedule", ["constant", "cosine"])
+def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, schedule):
     """The full network (dropout, BN, patches, heights) for 3 epochs, against 2 epochs, a kill inside epoch 3 (after
-    its optimiser steps), and a resumption."""
-    config = train_config(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1)
+    its optimiser steps), and a resumption; the cosine schedule needs no state of its own."""
+    config = train_config(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1,
+                          lr_schedule=schedule)
     full = preset("release")
     data = cluster_data(clouds[1:], 0, config, patch_config())
     train_cluster(config, full, data, tmp_path / "straight", progress=False)
@@ -81,6 +86,31 @@ def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch):
     drop_seconds = [{k: v for k, v in row.items() if k != "seconds"} for row in straight["history"]]
     assert drop_seconds == [{k: v for k, v in row.items() if k != "seconds"} for row in resumed["history"]]
     assert pd.read_csv(tmp_path / "resumed" / HISTORY)["epoch"].tolist() == [1, 2, 3]
+
+
+def test_cosine_schedule_decays_from_lr_to_zero_at_max_epochs():
+    config = train_config(lr=0.01, max_epochs=4, lr_schedule="cosine")
+    rates = [learning_rate(config, epoch, step, 10) for epoch in range(1, 5) for step in range(10)]
+    assert rates[0] == 0.01 and rates[20] == pytest.approx(0.005) and 0 < rates[-1] < 1e-4
+    assert all(a > b for a, b in zip(rates, rates[1:], strict=False))
+    assert learning_rate(train_config(lr=0.01, lr_schedule="constant"), 3, 7, 10) == 0.01
+
+
+def test_result_reports_the_input_normals_error(tmp_path, clouds):
+    """Ground truth made the first normal of nf turned by exactly 10 degrees: the error the network starts from."""
+    cloud = cube_cloud(600, seed=3, n_clusters=1)
+    first = cloud.features.nf[:, :3].astype(np.float64)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    side = np.cross(first, np.where(np.abs(first[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+    side /= np.linalg.norm(side, axis=1, keepdims=True)
+    cloud.normals = (np.cos(np.radians(10)) * first + np.sin(np.radians(10)) * side).astype(np.float32)
+    config = train_config(batch_size=128, max_epochs=1, threads=1)
+    data = cluster_data([cloud], 0, config, patch_config())
+    np.testing.assert_allclose(input_angles(data), 10.0, atol=1e-3)
+    train_cluster(config, NORMALS_ONLY, data, tmp_path, False)
+    result = json.loads((tmp_path / RESULT).read_text())
+    assert result["input_val_mean_deg"] == pytest.approx(10.0, abs=1e-3)
+    assert result["input_val_rmse_deg"] == pytest.approx(10.0, abs=1e-3)
 
 
 def test_loader_workers_train_the_same_network(tmp_path, clouds):
@@ -150,7 +180,7 @@ def test_other_settings_start_over(tmp_path, clouds):
 
 @pytest.mark.parametrize("field, value", [("optimizer", "rmsprop"), ("loss", "cos"), ("device", "tpu"), ("lr", 0.0),
                                           ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0),
-                                          ("loader_workers", -1)])
+                                          ("loader_workers", -1), ("lr_schedule", "step")])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         train_config(**{field: value})

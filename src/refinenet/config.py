@@ -285,6 +285,7 @@ class PatchConfig:
 
 
 OPTIMIZERS = ("sgd", "adam")
+LR_SCHEDULES = ("constant", "cosine")
 
 
 DEVICES = ("auto", "cpu", "cuda")
@@ -297,7 +298,10 @@ class TrainConfig:
     optimizer: str
     """sgd (§9, with `momentum`) or adam (an option for short CPU profiles, typically with lr 1e-3)."""
     lr: float
-    """Learning rate, constant (no decay in [P] or [C])."""
+    """Learning rate; the starting one under a schedule."""
+    lr_schedule: str
+    """constant ([P], [C]) or cosine: decayed per step to 0 at `max_epochs`, an option beyond the paper that lets
+    a short training end on small steps instead of Adam's noise (benchmarks/results/training.md)."""
     momentum: float
     """SGD momentum (unused by adam)."""
     weight_decay: float
@@ -328,6 +332,8 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"optimizer '{self.optimizer}' is not one of {OPTIMIZERS}")
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(f"lr_schedule '{self.lr_schedule}' is not one of {LR_SCHEDULES}")
         if self.loss not in LOSSES:
             raise ValueError(f"loss '{self.loss}' is not one of {tuple(LOSSES)}")
         if self.device not in DEVICES:

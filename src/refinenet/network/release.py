@@ -183,10 +183,14 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "",
         "## Validation error (held-out points of the training clouds, unoriented, degrees)",
         "",
-        "| cluster | training points | validation points | best epoch | epochs | validation RMSE |",
-        "|---|---|---|---|---|---|",
+        "| cluster | training points | validation points | best epoch | epochs | validation RMSE | of its input |",
+        "|---|---|---|---|---|---|---|",
         *(f"| {c} | {r['train_points']:,} | {r['val_points']:,} | {r['best_epoch']} | {r['epochs']} | "
-          f"{r['best_val_rmse_deg']:.2f} |" for c, r in sorted(card["clusters"].items(), key=lambda i: int(i[0]))),
+          f"{r['best_val_rmse_deg']:.2f} | {_degrees(r.get('input_val_rmse_deg'))} |"
+          for c, r in sorted(card["clusters"].items(), key=lambda i: int(i[0]))),
+        "",
+        "*Of its input*: the RMSE of the initial normals the network refines, on the same points (blank in cards",
+        "exported before it was recorded).",
         "",
         "## Scale",
         "",
@@ -198,3 +202,7 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _degrees(value: float | None) -> str:
+    return "" if value is None else f"{value:.2f}"

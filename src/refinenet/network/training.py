@@ -10,8 +10,9 @@ Output folder of a cluster (`cluster_dir`):
   was cleared (Snakemake and DVC clear an unfinished step's outputs) still ends with the best epoch's weights.
 * `history.csv`: epoch, train_loss, val_mean_deg, val_rmse_deg, seconds (rewritten atomically after every
   epoch); the pipeline keeps it elsewhere (`history_path`), in a folder that DVC declares as plots.
-* `result.json`: how the training ended (`TrainResult`) and the sample counts, written last: its presence marks
-  a finished cluster.
+* `result.json`: how the training ended (`TrainResult`), the sample counts and the validation error of the first
+  input normal (the initial normal when X = 9: what the network must improve on), written last: its presence
+  marks a finished cluster.
 * `empty.json` instead of `best.pt`, when the cluster has too few points to train (fewer than 2 training or no
   validation points): inference then keeps the first normal of nf (the initial normal when X = 9) there.
 """
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import time
 from collections.abc import Iterator, Sequence
@@ -105,8 +107,29 @@ def train_cluster(config: TrainConfig, network: NetworkConfig, data: ClusterData
         (out_dir / EMPTY).unlink(missing_ok=True)
         with torch_threads(config.threads):
             result = _train(config, network, data, out_dir, checkpoint_dir / CHECKPOINT, history_path, progress)
+        angles = input_angles(data)
+        counts |= {"input_val_mean_deg": float(angles.mean()),
+                   "input_val_rmse_deg": float(np.sqrt(np.mean(angles ** 2)))}
     write_text(out_dir / RESULT, json.dumps({**counts, **asdict(result)}, indent=2) + "\n")
     return result
+
+
+def input_angles(data: ClusterData) -> np.ndarray:
+    """Unoriented angles (degrees) of the first normal of nf on the validation samples: the error the network
+    starts from (the initial normals when X = 9, and what an empty cluster keeps)."""
+    samples = data.val
+    return np.concatenate([unoriented_angles(data.clouds[c].features.nf[samples.point[samples.cloud == c], :3],
+                                             data.clouds[c].normals[samples.point[samples.cloud == c]])
+                           for c in np.unique(samples.cloud)])
+
+
+def learning_rate(config: TrainConfig, epoch: int, step: int, steps_per_epoch: int) -> float:
+    """The learning rate of training step `step` (0-based) of `epoch` (1-based): a function of the position
+    alone, so that a resumed run needs no scheduler state."""
+    if config.lr_schedule == "constant":
+        return config.lr
+    done = ((epoch - 1) * steps_per_epoch + step) / (config.max_epochs * steps_per_epoch)
+    return 0.5 * config.lr * (1.0 + math.cos(math.pi * done))
 
 
 @contextmanager
@@ -155,7 +178,8 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
                                     drop_last=True, workers=config.loader_workers),
                        total=n_train // batch_size, desc=f"cluster {data.cluster} epoch {epoch}", leave=False,
                        disable=not progress)
-        train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, device)
+        rates = [learning_rate(config, epoch, step, n_train // batch_size) for step in range(n_train // batch_size)]
+        train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, rates, device)
         angles = _validate(model, data, network, config, device)
         row = {"epoch": epoch, "train_loss": train_loss, "val_mean_deg": float(angles.mean()),
                "val_rmse_deg": float(np.sqrt(np.mean(angles ** 2))), "seconds": time.perf_counter() - start}
@@ -206,11 +230,14 @@ def _digest(*arrays: np.ndarray) -> str:
 
 
 def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: Any, batches: tqdm,
-                 device: torch.device) -> float:
-    """One pass over the training batches (a tqdm-wrapped `ClusterData.batches`); the mean loss per sample."""
+                 rates: Sequence[float], device: torch.device) -> float:
+    """One pass over the training batches (a tqdm-wrapped `ClusterData.batches`), step i at learning rate
+    rates[i]; the mean loss per sample."""
     model.train()
     total, count = 0.0, 0
-    for inputs in batches:
+    for inputs, rate in zip(batches, rates, strict=True):
+        for group in optimizer.param_groups:
+            group["lr"] = rate
         target = torch.from_numpy(inputs.target).to(device)
         optimizer.zero_grad(set_to_none=True)
         loss = loss_fn(model(*inputs.tensors(device)), target)

@@ -505,7 +505,8 @@ class Pipeline:
             parts.append(
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
                 f"Kc = {params.clustering.n_clusters}, X = {f.n_normals}"
-                f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}, "
+                f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
+                + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
                 + (f", at most {t.max_train_points_per_cloud} training points per cloud"
                    if t.max_train_points_per_cloud else "") + ".")

@@ -1,0 +1,159 @@
+"""What limits the default (cpu profile) training? One cluster's network trained under named changes of the
+profile's recipe, on a finished run's training clouds, features and clusters, with the validation error per epoch
+and the CPU time of each (one thread, as a pipeline training job runs).
+
+    python benchmarks/training_study.py RUN_DIR --cluster 1 --experiments cpu cosine batch64 --epochs 8
+    python benchmarks/training_study.py RUN_DIR --report      (training.md and training.png from the kept runs)
+
+Each experiment writes benchmarks/results/training/cluster<C>_<name>_e<epochs>.csv (the history, with cumulative CPU
+seconds) and .json (the settings, how it ended and the validation error of the initial normals it refines).
+Patience is set to the epoch count, so every curve runs to the end; the report says where early stopping would
+have stopped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+import torch  # noqa: E402
+from machine import machine_info  # noqa: E402
+
+from refinenet import config  # noqa: E402
+from refinenet.data.noise import derive_seed  # noqa: E402
+from refinenet.features.cache import load_for_cloud  # noqa: E402
+from refinenet.network.clustering import load_cluster_model  # noqa: E402
+from refinenet.network.dataset import prepare  # noqa: E402
+from refinenet.network.model import architecture  # noqa: E402
+from refinenet.network.training import HISTORY, RESULT, cluster_data, train_cluster  # noqa: E402
+from refinenet.pipeline.workflow import CLOUD, CLUSTER_MODEL, FEATURES, FULL  # noqa: E402
+
+OUT = Path(__file__).parent / "results" / "training"
+#: name -> (what it changes, overrides of the run's `training` block)
+EXPERIMENTS = {
+    "cpu": ("the cpu profile's recipe: Adam, lr 1e-3 constant, batch 256, 1000 points per cloud", {}),
+    "cosine": ("lr decayed to 0 along a cosine over the epochs", {"lr_schedule": "cosine"}),
+    "batch64": ("batch 64 (4x the steps per epoch)", {"batch_size": 64}),
+    "batch64_cosine": ("batch 64 and the cosine decay", {"batch_size": 64, "lr_schedule": "cosine"}),
+    "sgd": ("the paper's optimiser: SGD, lr 1e-4, momentum 0.9, weight decay 0.02, batch 512",
+            {"optimizer": "sgd", "lr": 1.0e-4, "momentum": 0.9, "weight_decay": 0.02, "batch_size": 512}),
+    "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud",
+                                  {"batch_size": 64, "lr_schedule": "cosine", "max_train_points_per_cloud": 2000}),
+}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("run", type=Path, help="a finished run's repository (its params.yaml and results/)")
+    parser.add_argument("--cluster", type=int)
+    parser.add_argument("--experiments", nargs="+", choices=sorted(EXPERIMENTS), default=[])
+    parser.add_argument("--epochs", type=int, default=8)
+    parser.add_argument("--report", action="store_true", help="write training.md and training.png")
+    args = parser.parse_args()
+    params = config.load(args.run / "params.yaml")
+    if args.experiments:
+        study(args.run, params, args.cluster, args.experiments, args.epochs)
+    if args.report:
+        report(params)
+    return 0
+
+
+def study(run: Path, params: config.Params, cluster: int, names: list[str], epochs: int) -> None:
+    """Train `cluster`'s network once per experiment and keep its history beside the settings."""
+    torch.set_num_threads(1)
+    model, _ = load_cluster_model(run / CLUSTER_MODEL.format(variant=FULL))
+    clouds = []
+    for cloud_path in sorted((run / "results" / "clouds" / "train").glob("*/*.npz")):
+        key = str(cloud_path.relative_to(run / "results" / "clouds")).removesuffix(".npz")
+        cloud, features = load_for_cloud(run / CLOUD.format(cloud=key), run / FEATURES.format(variant=FULL, cloud=key))
+        clouds.append(prepare(cloud.points, features, model, cloud.normals))
+    network = architecture(params.network, params.features, params.patches)
+    OUT.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        train = replace(params.training, **EXPERIMENTS[name][1], max_epochs=epochs, patience=epochs,
+                        seed=derive_seed(params.seed, "train", cluster), threads=1)
+        data = cluster_data(clouds, cluster, train, params.patches)
+        with tempfile.TemporaryDirectory() as tmp:
+            cpu, wall = time.process_time(), time.perf_counter()
+            train_cluster(train, network, data, tmp, progress=False)
+            cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
+            history = pd.read_csv(Path(tmp) / HISTORY)
+            result = json.loads((Path(tmp) / RESULT).read_text())
+        history["cpu_s"] = history["seconds"].cumsum() * cpu / wall
+        stem = OUT / f"cluster{cluster}_{name}_e{epochs}"
+        history.to_csv(stem.with_suffix(".csv"), index=False)
+        record = {"cluster": cluster, "experiment": name, "changes": EXPERIMENTS[name][1], "training": asdict(train),
+                  "profile": params.profile, "result": result, "cpu_s": cpu, "wall_s": wall, "machine": machine_info()}
+        stem.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
+        print(f"cluster {cluster} {name}: best val mean {history['val_mean_deg'].min():.2f} deg "
+              f"(input {result['input_val_mean_deg']:.2f}), {cpu / 60:.1f} CPU min")
+
+
+def report(params: config.Params) -> None:
+    """training.md (one row per kept experiment, compared with the cpu recipe's 4 epochs on the same cluster) and
+    training.png (validation mean error against CPU minutes, one panel per cluster)."""
+    runs = []
+    for path in sorted(OUT.glob("cluster*_*.json")):
+        record = json.loads(path.read_text())
+        runs.append((record, pd.read_csv(path.with_suffix(".csv"))))
+    order = list(EXPERIMENTS)
+    runs.sort(key=lambda run: (run[0]["cluster"], order.index(run[0]["experiment"]), run[0]["training"]["max_epochs"]))
+    # The cpu recipe's rate is constant, so the first 4 epochs of a longer cpu run are the 4-epoch run itself.
+    baseline = {record["cluster"]: history.iloc[:4] for record, history in runs
+                if record["experiment"] == "cpu" and len(history) >= 4}
+    rows, curves = [], {}
+    for record, history in runs:
+        label = f"{record['experiment']}, {record['training']['max_epochs']} epochs"
+        curves.setdefault(record["cluster"], []).append((label, history))
+        val, result = history["val_mean_deg"], record["result"]
+        best = int(history["val_rmse_deg"].idxmin())
+        row = {
+            "cluster": record["cluster"], "experiment": label,
+            "train / val points": f"{result['train_points']:,} / {result['val_points']:,}",
+            "input": f"{result['input_val_mean_deg']:.2f}",
+            **{f"epoch {e}": f"{val.iloc[e - 1]:.2f}" if len(val) >= e else "" for e in (1, 2, 4, 6, 8)},
+            "kept (epoch)": f"{val.iloc[best]:.2f} ({best + 1})",
+            "last change": f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else "",
+            "CPU min": f"{history['cpu_s'].iloc[-1] / 60:.1f}",
+            "vs cpu recipe": "",
+        }
+        reference = baseline.get(record["cluster"])
+        if reference is not None:
+            kept = reference["val_mean_deg"].iloc[int(reference["val_rmse_deg"].idxmin())]
+            extra = (history["cpu_s"].iloc[-1] - reference["cpu_s"].iloc[-1]) / 60
+            row["vs cpu recipe"] = f"{val.iloc[best] - kept:+.2f} deg, {extra:+.1f} CPU min"
+        rows.append(row)
+    table = pd.DataFrame(rows)
+    lines = ["# Training study: what limits the cpu profile's training", "",
+             f"`benchmarks/training_study.py` on the `{params.profile}` profile's training clouds, features and "
+             "clusters (seed and split of the pipeline's training job); one thread per run, as a training job "
+             "runs. Mean unoriented error in degrees on the cluster's validation points per epoch; *input* is the "
+             "initial (MFPS) normals' error on the same points; *kept* is the epoch of lowest validation RMSE, the "
+             "weights a training keeps; *vs cpu recipe* compares it and the CPU time with the cpu profile's "
+             "recipe as it stood (4 epochs).", "",
+             "| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
+    lines += ["| " + " | ".join(map(str, row)) + " |" for row in table.itertuples(index=False)]
+    lines += ["", "Experiments:", ""] + [f"- `{name}`: {text}" for name, (text, _) in EXPERIMENTS.items()]
+    lines += ["", "![validation error against CPU minutes](training.png)"]
+    (OUT.parent / "training.md").write_text("\n".join(lines) + "\n")
+    fig, axes = plt.subplots(1, len(curves), figsize=(5 * len(curves), 4), squeeze=False)
+    for ax, (cluster, cluster_runs) in zip(axes[0], sorted(curves.items()), strict=True):
+        for name, history in cluster_runs:
+            ax.plot(history["cpu_s"] / 60, history["val_mean_deg"], marker="o", label=name)
+        ax.set(title=f"cluster {cluster}", xlabel="CPU minutes", ylabel="validation mean error (deg)")
+        ax.legend(fontsize="small")
+    fig.tight_layout()
+    fig.savefig(OUT.parent / "training.png", dpi=100, metadata={"Software": None})
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
