@@ -3,7 +3,8 @@ profile's recipe, on a finished run's training clouds, features and clusters, wi
 and the CPU time of each (one thread, as a pipeline training job runs).
 
     python benchmarks/training_study.py RUN_DIR --cluster 1 --experiments cpu cosine batch64 --epochs 8
-    python benchmarks/training_study.py RUN_DIR --report      (training.md and training.png from the kept runs)
+    python benchmarks/training_study.py RUN_DIR --report      (training.md and training.png from the kept runs,
+                                                               and RUN_DIR's own training, every cluster)
 
 Each experiment writes benchmarks/results/training/cluster<C>_<name>_e<epochs>.csv (the history, with cumulative CPU
 seconds) and .json (the settings, how it ended and the validation error of the initial normals it refines).
@@ -34,19 +35,24 @@ from refinenet.features.cache import load_for_cloud  # noqa: E402
 from refinenet.network.clustering import load_cluster_model  # noqa: E402
 from refinenet.network.dataset import prepare  # noqa: E402
 from refinenet.network.model import architecture  # noqa: E402
-from refinenet.network.training import HISTORY, RESULT, cluster_data, train_cluster  # noqa: E402
-from refinenet.pipeline.workflow import CLOUD, CLUSTER_MODEL, FEATURES, FULL  # noqa: E402
+from refinenet.network.training import HISTORY as HISTORY_FILE  # noqa: E402
+from refinenet.network.training import RESULT, cluster_data, train_cluster  # noqa: E402
+from refinenet.pipeline.workflow import CLOUD, CLUSTER_MODEL, FEATURES, FULL, HISTORY, NETWORK  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "training"
-#: name -> (what it changes, overrides of the run's `training` block)
+#: The recipe the study started from: the cpu profile's training before it (commit 39646f5). Every experiment
+#: is this with some changes, whatever the run's params.yaml now says.
+CPU_RECIPE = {"optimizer": "adam", "lr": 1.0e-3, "lr_schedule": "constant", "weight_decay": 0.0, "batch_size": 256,
+              "max_train_points_per_cloud": 1000}
+#: name -> (what it changes, the changes to CPU_RECIPE)
 EXPERIMENTS = {
-    "cpu": ("the cpu profile's recipe: Adam, lr 1e-3 constant, batch 256, 1000 points per cloud", {}),
+    "cpu": ("the cpu profile's recipe as it stood: Adam, lr 1e-3 constant, batch 256, 1000 points per cloud", {}),
     "cosine": ("lr decayed to 0 along a cosine over the epochs", {"lr_schedule": "cosine"}),
     "batch64": ("batch 64 (4x the steps per epoch)", {"batch_size": 64}),
     "batch64_cosine": ("batch 64 and the cosine decay", {"batch_size": 64, "lr_schedule": "cosine"}),
     "sgd": ("the paper's optimiser: SGD, lr 1e-4, momentum 0.9, weight decay 0.02, batch 512",
             {"optimizer": "sgd", "lr": 1.0e-4, "momentum": 0.9, "weight_decay": 0.02, "batch_size": 512}),
-    "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud",
+    "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud (the cpu profile now)",
                                   {"batch_size": 64, "lr_schedule": "cosine", "max_train_points_per_cloud": 2000}),
 }
 
@@ -63,7 +69,7 @@ def main() -> int:
     if args.experiments:
         study(args.run, params, args.cluster, args.experiments, args.epochs)
     if args.report:
-        report(params)
+        report(params, pipeline_training(args.run, params))
     return 0
 
 
@@ -79,14 +85,14 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
     network = architecture(params.network, params.features, params.patches)
     OUT.mkdir(parents=True, exist_ok=True)
     for name in names:
-        train = replace(params.training, **EXPERIMENTS[name][1], max_epochs=epochs, patience=epochs,
+        train = replace(params.training, **(CPU_RECIPE | EXPERIMENTS[name][1]), max_epochs=epochs, patience=epochs,
                         seed=derive_seed(params.seed, "train", cluster), threads=1)
         data = cluster_data(clouds, cluster, train, params.patches)
         with tempfile.TemporaryDirectory() as tmp:
             cpu, wall = time.process_time(), time.perf_counter()
             train_cluster(train, network, data, tmp, progress=False)
             cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
-            history = pd.read_csv(Path(tmp) / HISTORY)
+            history = pd.read_csv(Path(tmp) / HISTORY_FILE)
             result = json.loads((Path(tmp) / RESULT).read_text())
         history["cpu_s"] = history["seconds"].cumsum() * cpu / wall
         stem = OUT / f"cluster{cluster}_{name}_e{epochs}"
@@ -98,7 +104,34 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
               f"(input {result['input_val_mean_deg']:.2f}), {cpu / 60:.1f} CPU min")
 
 
-def report(params: config.Params) -> None:
+def pipeline_training(run: Path, params: config.Params) -> list[str]:
+    """Markdown lines on how the run's own training of `full` ended, every cluster (empty if it has none)."""
+    results = sorted((run / NETWORK.format(variant=FULL, cluster="x")).parent.glob(f"cluster_*/{RESULT}"))
+    if not results:
+        return []
+    t = params.training
+    lines = ["", f"## The run's own training ({t.optimizer}, lr {t.lr}, {t.lr_schedule}, batch {t.batch_size}, "
+             f"{t.max_epochs} epochs, at most {t.max_train_points_per_cloud} points per cloud)", "",
+             f"The run given (profile `{params.profile}`): the pipeline's training jobs, one thread each, two at a "
+             "time. *Last change*: the last epoch's change of the validation mean.", "",
+             "| cluster | train / val points | input val mean / RMSE | val mean per epoch | kept mean / RMSE "
+             "| of input removed | last change | job seconds |", "|---|---|---|---|---|---|---|---|"]
+    for path in results:
+        result = json.loads(path.read_text())
+        c = result["cluster"]
+        history = pd.read_csv(run / HISTORY.format(variant=FULL, cluster=c))
+        val, best = history["val_mean_deg"], int(history["val_rmse_deg"].idxmin())
+        last = f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else ""
+        lines.append(f"| {c} | {result['train_points']:,} / {result['val_points']:,} | "
+                     f"{result['input_val_mean_deg']:.2f} / {result['input_val_rmse_deg']:.2f} | "
+                     f"{', '.join(f'{v:.2f}' for v in val)} | {val.iloc[best]:.2f} / "
+                     f"{history['val_rmse_deg'].iloc[best]:.2f} | "
+                     f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}% | {last} | "
+                     f"{history['seconds'].sum():.0f} |")
+    return lines
+
+
+def report(params: config.Params, run_lines: list[str]) -> None:
     """training.md (one row per kept experiment, compared with the cpu recipe's 4 epochs on the same cluster) and
     training.png (validation mean error against CPU minutes, one panel per cluster)."""
     runs = []
@@ -122,6 +155,7 @@ def report(params: config.Params) -> None:
             "input": f"{result['input_val_mean_deg']:.2f}",
             **{f"epoch {e}": f"{val.iloc[e - 1]:.2f}" if len(val) >= e else "" for e in (1, 2, 4, 6, 8)},
             "kept (epoch)": f"{val.iloc[best]:.2f} ({best + 1})",
+            "of input removed": f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}%",
             "last change": f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else "",
             "CPU min": f"{history['cpu_s'].iloc[-1] / 60:.1f}",
             "vs cpu recipe": "",
@@ -139,11 +173,14 @@ def report(params: config.Params) -> None:
              "runs. Mean unoriented error in degrees on the cluster's validation points per epoch; *input* is the "
              "initial (MFPS) normals' error on the same points; *kept* is the epoch of lowest validation RMSE, the "
              "weights a training keeps; *vs cpu recipe* compares it and the CPU time with the cpu profile's "
-             "recipe as it stood (4 epochs).", "",
+             "recipe as it stood (4 epochs) on the same cluster. A run with more points per cloud also holds out more "
+             "(in proportion), so it is validated on other points: compare it by *of input removed*, the share "
+             "of the input normals' mean error its network removes. CPU minutes are the process's CPU time; two "
+             "or three runs shared the 2 cores.", "",
              "| " + " | ".join(table.columns) + " |", "|" + "---|" * len(table.columns)]
     lines += ["| " + " | ".join(map(str, row)) + " |" for row in table.itertuples(index=False)]
     lines += ["", "Experiments:", ""] + [f"- `{name}`: {text}" for name, (text, _) in EXPERIMENTS.items()]
-    lines += ["", "![validation error against CPU minutes](training.png)"]
+    lines += ["", "![validation error against CPU minutes](training.png)", *run_lines]
     (OUT.parent / "training.md").write_text("\n".join(lines) + "\n")
     fig, axes = plt.subplots(1, len(curves), figsize=(5 * len(curves), 4), squeeze=False)
     for ax, (cluster, cluster_runs) in zip(axes[0], sorted(curves.items()), strict=True):
