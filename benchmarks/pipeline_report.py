@@ -50,6 +50,7 @@ def main() -> None:
     parser.add_argument("--profile", required=True)
     parser.add_argument("--command", default="bash scripts/run.sh")
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--note", default="", help="how the run went, when not in one piece (a sentence)")
     args = parser.parse_args()
     summary = rule_summary(args.run_dir)
     lines = [
@@ -57,7 +58,8 @@ def main() -> None:
         "",
         f"`{args.command}` on a fresh clone: **{args.wall_seconds / 60:.1f} minutes** wall time in total "
         f"(environment set-up included), on {os.cpu_count()} cores, {platform.machine()}, Python "
-        f"{platform.python_version()}. Job seconds are summed over jobs that ran two at a time.",
+        f"{platform.python_version()}. Job seconds are summed over jobs that ran two at a time." +
+        (f" {args.note}" if args.note else ""),
         "",
         "| rule | jobs | job seconds (sum) | longest job (s) | peak memory of a job (MB) |",
         "|---|---|---|---|---|",
