@@ -8,8 +8,7 @@ and the CPU time of each (one thread, as a pipeline training job runs).
 
 Each experiment writes benchmarks/results/training/cluster<C>_<name>_e<epochs>.csv (the history, with cumulative CPU
 seconds) and .json (the settings, how it ended and the validation error of the initial normals it refines).
-Patience is set to the epoch count, so every curve runs to the end; the report says where early stopping would
-have stopped.
+Patience is set to the epoch count, so every curve runs to the end.
 """
 
 from __future__ import annotations
@@ -52,7 +51,7 @@ EXPERIMENTS = {
     "batch64_cosine": ("batch 64 and the cosine decay", {"batch_size": 64, "lr_schedule": "cosine"}),
     "sgd": ("the paper's optimiser: SGD, lr 1e-4, momentum 0.9, weight decay 0.02, batch 512",
             {"optimizer": "sgd", "lr": 1.0e-4, "momentum": 0.9, "weight_decay": 0.02, "batch_size": 512}),
-    "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud (the cpu profile now)",
+    "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud",
                                   {"batch_size": 64, "lr_schedule": "cosine", "max_train_points_per_cloud": 2000}),
 }
 
@@ -104,6 +103,15 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
               f"(input {result['input_val_mean_deg']:.2f}), {cpu / 60:.1f} CPU min")
 
 
+def kept(history: pd.DataFrame, result: dict) -> tuple[int, str, str]:
+    """The kept epoch (lowest validation RMSE, 0-based), the share of the input's mean error it removes, and the
+    last epoch's change of the validation mean."""
+    val, best = history["val_mean_deg"], int(history["val_rmse_deg"].idxmin())
+    removed = f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}%"
+    last = f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else ""
+    return best, removed, last
+
+
 def pipeline_training(run: Path, params: config.Params) -> list[str]:
     """Markdown lines on how the run's own training of `full` ended, every cluster (empty if it has none)."""
     results = sorted((run / NETWORK.format(variant=FULL, cluster="x")).parent.glob(f"cluster_*/{RESULT}"))
@@ -120,13 +128,13 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
         result = json.loads(path.read_text())
         c = result["cluster"]
         history = pd.read_csv(run / HISTORY.format(variant=FULL, cluster=c))
-        val, best = history["val_mean_deg"], int(history["val_rmse_deg"].idxmin())
-        last = f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else ""
+        val = history["val_mean_deg"]
+        best, removed, last = kept(history, result)
         lines.append(f"| {c} | {result['train_points']:,} / {result['val_points']:,} | "
                      f"{result['input_val_mean_deg']:.2f} / {result['input_val_rmse_deg']:.2f} | "
                      f"{', '.join(f'{v:.2f}' for v in val)} | {val.iloc[best]:.2f} / "
                      f"{history['val_rmse_deg'].iloc[best]:.2f} | "
-                     f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}% | {last} | "
+                     f"{removed} | {last} | "
                      f"{history['seconds'].sum():.0f} |")
     return lines
 
@@ -148,23 +156,23 @@ def report(params: config.Params, run_lines: list[str]) -> None:
         label = f"{record['experiment']}, {record['training']['max_epochs']} epochs"
         curves.setdefault(record["cluster"], []).append((label, history))
         val, result = history["val_mean_deg"], record["result"]
-        best = int(history["val_rmse_deg"].idxmin())
+        best, removed, last = kept(history, result)
         row = {
             "cluster": record["cluster"], "experiment": label,
             "train / val points": f"{result['train_points']:,} / {result['val_points']:,}",
             "input": f"{result['input_val_mean_deg']:.2f}",
             **{f"epoch {e}": f"{val.iloc[e - 1]:.2f}" if len(val) >= e else "" for e in (1, 2, 4, 6, 8)},
             "kept (epoch)": f"{val.iloc[best]:.2f} ({best + 1})",
-            "of input removed": f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}%",
-            "last change": f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else "",
+            "of input removed": removed,
+            "last change": last,
             "CPU min": f"{history['cpu_s'].iloc[-1] / 60:.1f}",
             "vs cpu recipe": "",
         }
         reference = baseline.get(record["cluster"])
         if reference is not None:
-            kept = reference["val_mean_deg"].iloc[int(reference["val_rmse_deg"].idxmin())]
+            reference_mean = reference["val_mean_deg"].iloc[int(reference["val_rmse_deg"].idxmin())]
             extra = (history["cpu_s"].iloc[-1] - reference["cpu_s"].iloc[-1]) / 60
-            row["vs cpu recipe"] = f"{val.iloc[best] - kept:+.2f} deg, {extra:+.1f} CPU min"
+            row["vs cpu recipe"] = f"{val.iloc[best] - reference_mean:+.2f} deg, {extra:+.1f} CPU min"
         rows.append(row)
     table = pd.DataFrame(rows)
     lines = ["# Training study: what limits the cpu profile's training", "",

@@ -118,9 +118,9 @@ def input_angles(data: ClusterData) -> np.ndarray:
     """Unoriented angles (degrees) of the first normal of nf on the validation samples: the error the network
     starts from (the initial normals when X = 9, and what an empty cluster keeps)."""
     samples = data.val
-    return np.concatenate([unoriented_angles(data.clouds[c].features.nf[samples.point[samples.cloud == c], :3],
-                                             data.clouds[c].normals[samples.point[samples.cloud == c]])
-                           for c in np.unique(samples.cloud)])
+    rows = {c: samples.point[samples.cloud == c] for c in np.unique(samples.cloud)}
+    return np.concatenate([unoriented_angles(data.clouds[c].features.nf[index, :3], data.clouds[c].normals[index])
+                           for c, index in rows.items()])
 
 
 def learning_rate(config: TrainConfig, epoch: int, step: int, steps_per_epoch: int) -> float:
@@ -178,7 +178,8 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
                                     drop_last=True, workers=config.loader_workers),
                        total=n_train // batch_size, desc=f"cluster {data.cluster} epoch {epoch}", leave=False,
                        disable=not progress)
-        rates = [learning_rate(config, epoch, step, n_train // batch_size) for step in range(n_train // batch_size)]
+        steps = n_train // batch_size
+        rates = [learning_rate(config, epoch, step, steps) for step in range(steps)]
         train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, rates, device)
         angles = _validate(model, data, network, config, device)
         row = {"epoch": epoch, "train_loss": train_loss, "val_mean_deg": float(angles.mean()),
