@@ -51,6 +51,8 @@ EXPERIMENTS = {
     "batch64_cosine": ("batch 64 and the cosine decay", {"batch_size": 64, "lr_schedule": "cosine"}),
     "sgd": ("the paper's optimiser: SGD, lr 1e-4, momentum 0.9, weight decay 0.02, batch 512",
             {"optimizer": "sgd", "lr": 1.0e-4, "momentum": 0.9, "weight_decay": 0.02, "batch_size": 512}),
+    "batch64_cosine_bfloat16": ("batch 64, the cosine decay, and the passes in bfloat16 (autocast)",
+                                {"batch_size": 64, "lr_schedule": "cosine", "precision": "bfloat16"}),
     "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud",
                                   {"batch_size": 64, "lr_schedule": "cosine", "max_train_points_per_cloud": 2000}),
 }

@@ -131,7 +131,7 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
 def real(params, folder, training_clouds, cluster_path, network_folders, footer):
     model, _ = load_cluster_model(cluster_path)
     networks = load_networks(network_folders, architecture(params.network, params.features, params.patches),
-                             params.inference.device)
+                             params.inference.device, precision=params.inference.precision)
     release = Release.of_run(params, model, networks, [read_cloud(path).points for path in training_clouds])
     least = min_points(params, REFINENET, refine_initial=False)
     scans = []

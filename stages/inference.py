@@ -28,7 +28,8 @@ def main(params, args):
     model, _ = load_cluster_model(args.clusters)
     if len(args.networks) != model.n_clusters:
         raise InputError(args.clusters, f"{model.n_clusters} clusters, but {len(args.networks)} network folders")
-    networks = load_networks(args.networks, network, device=params.inference.device)
+    networks = load_networks(args.networks, network, device=params.inference.device,
+                             precision=params.inference.precision)
     seed = derive_seed(params.seed, "refine", cloud_key(args.cloud, cloud))
     refined = refine_normals(cloud.points, features, model, networks, params.patches, params.inference, seed=seed,
                              progress=True)

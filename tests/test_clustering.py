@@ -39,12 +39,14 @@ def same_partition(a: np.ndarray, b: np.ndarray) -> bool:
 CORNERS = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, -1.0, 0]])
 
 
-def test_separated_blobs_are_recovered():
+def test_separated_blobs_are_recovered_and_numbered_by_size():
+    """Blobs of 900, 600, 300 and 1,200 samples: cluster 0 is the largest (the workflow trains it first)."""
     features, truth = blobs([900, 600, 300, 1200], CORNERS)
     model = fit_clusters(features, clustering_config(n_clusters=4), seed=3)
     labels = assign(model, features)
     assert labels.dtype.kind == "i" and labels.min() >= 0 and labels.max() <= 3
     assert same_partition(labels, truth)
+    assert np.bincount(labels).tolist() == [1200, 900, 600, 300]
 
 
 def test_subsampled_fit_is_deterministic_and_still_recovers_the_blobs():

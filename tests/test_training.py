@@ -50,12 +50,13 @@ def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
     assert torch.load(tmp_path / BEST, weights_only=True)["epoch"] == result.best_epoch
 
 
-@pytest.mark.parametrize("schedule", ["constant", "cosine"])
-def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, schedule):
+@pytest.mark.parametrize("schedule, precision", [("constant", "float32"), ("cosine", "float32"),
+                                                 ("cosine", "bfloat16")])
+def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, schedule, precision):
     """The full network (dropout, BN, patches, heights) for 3 epochs, against 2 epochs, a kill inside epoch 3 (after
     its optimiser steps), and a resumption; the cosine schedule needs no state of its own."""
     config = train_config(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1,
-                          lr_schedule=schedule)
+                          lr_schedule=schedule, precision=precision)
     full = preset("release")
     data = cluster_data(clouds[1:], 0, config, patch_config())
     train_cluster(config, full, data, tmp_path / "straight", progress=False)
@@ -74,7 +75,7 @@ def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, sch
     assert len(pd.read_csv(tmp_path / "resumed" / HISTORY)) == 2
     monkeypatch.setattr(training, "_validate", validate)
     result = train_cluster(config, full, data, tmp_path / "resumed", progress=False)
-    assert result.epochs == 3
+    assert result.epochs == 3 and result.precision == precision
 
     straight = torch.load(tmp_path / "straight" / CHECKPOINT, weights_only=True)
     resumed = torch.load(tmp_path / "resumed" / CHECKPOINT, weights_only=True)
@@ -86,6 +87,23 @@ def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, sch
     drop_seconds = [{k: v for k, v in row.items() if k != "seconds"} for row in straight["history"]]
     assert drop_seconds == [{k: v for k, v in row.items() if k != "seconds"} for row in resumed["history"]]
     assert pd.read_csv(tmp_path / "resumed" / HISTORY)["epoch"].tolist() == [1, 2, 3]
+
+
+def test_bfloat16_passes_learn_as_float32_does(tmp_path, clouds):
+    """The learnable problem of the test above with the passes in bfloat16 (autocast): the weights stay float32,
+    the result records the precision, and the validation error ends close to float32's."""
+    ends = {}
+    for precision in ("float32", "bfloat16"):
+        config = train_config(optimizer="adam", lr=1e-3, batch_size=64, max_epochs=3, seed=1, threads=1,
+                              precision=precision)
+        result = train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()),
+                               tmp_path / precision, False)
+        assert result.precision == precision
+        assert json.loads((tmp_path / precision / RESULT).read_text())["precision"] == precision
+        weights = torch.load(tmp_path / precision / BEST, weights_only=True)["model"]
+        assert all(v.dtype == torch.float32 for v in weights.values() if v.is_floating_point())
+        ends[precision] = pd.read_csv(tmp_path / precision / HISTORY)["val_mean_deg"].iloc[-1]
+    assert ends["bfloat16"] == pytest.approx(ends["float32"], rel=0.2)
 
 
 def test_cosine_schedule_decays_from_lr_to_zero_at_max_epochs():
@@ -180,7 +198,7 @@ def test_other_settings_start_over(tmp_path, clouds):
 
 @pytest.mark.parametrize("field, value", [("optimizer", "rmsprop"), ("loss", "cos"), ("device", "tpu"), ("lr", 0.0),
                                           ("batch_size", 0), ("val_fraction", 0.0), ("weight_decay", -1.0),
-                                          ("loader_workers", -1), ("lr_schedule", "step")])
+                                          ("loader_workers", -1), ("lr_schedule", "step"), ("precision", "fp16")])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         train_config(**{field: value})

@@ -289,6 +289,9 @@ LR_SCHEDULES = ("constant", "cosine")
 
 
 DEVICES = ("auto", "cpu", "cuda")
+#: Precisions of the networks' heavy layers; auto: bfloat16 where the CPU computes it natively
+#: (`network.devices.resolve_precision`).
+PRECISIONS = ("float32", "bfloat16", "auto")
 
 
 @dataclass(frozen=True)
@@ -321,6 +324,10 @@ class TrainConfig:
     """Random subset (drawn once) of each cloud's training points of the cluster, for CPU profiles; None: all."""
     device: str
     """auto (cuda when available), cpu or cuda."""
+    precision: str = "float32"
+    """float32 ([P]) or bfloat16: the forward and backward passes compute in bfloat16 (autocast) while weights and
+    optimiser state stay float32, 1.5x faster on a CPU with native bfloat16 (benchmarks/results/training.md);
+    auto picks bfloat16 only there. Beyond the paper. (Releases exported before it existed trained in float32.)"""
     seed: int = 0
     """Seeds the initial weights, the validation split, the point caps, shuffling, patches and dropout."""
     threads: int | None = None
@@ -338,6 +345,8 @@ class TrainConfig:
             raise ValueError(f"loss '{self.loss}' is not one of {tuple(LOSSES)}")
         if self.device not in DEVICES:
             raise ValueError(f"device '{self.device}' is not one of {DEVICES}")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision '{self.precision}' is not one of {PRECISIONS}")
         if not self.lr > 0:
             raise ValueError(f"lr must be positive, got {self.lr}")
         for name in ("momentum", "weight_decay"):
@@ -365,6 +374,13 @@ class InferenceConfig:
     """Points per network call; bounds the memory of the patches and height maps built for a batch."""
     device: str
     """auto (cuda when torch sees a GPU), cpu or cuda."""
+    precision: str = "float32"
+    """Of the point MLP and height-map convolutions (`model.reduced_precision`): float32, bfloat16, or auto
+    (bfloat16 on a CPU with native bfloat16)."""
+
+    def __post_init__(self) -> None:
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision '{self.precision}' is not one of {PRECISIONS}")
 
 
 @dataclass(frozen=True)

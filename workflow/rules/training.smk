@@ -1,5 +1,7 @@
 # One network per cluster (docs/algorithm.md §9), one step per variant. The network folder and the training
 # history are the outputs; checkpoints live outside them, so a killed run resumes from its last finished epoch.
+# Training is the longest step on the way to the tables: its jobs go before others that are ready, largest
+# cluster (cluster 0, `clustering.fit_clusters`) first, so that the longest job does not start last.
 
 for step in PIPE.family("training"):
 
@@ -25,6 +27,8 @@ for step in PIPE.family("training"):
         benchmark:
             f"logs/training/{step.variant}/cluster_{{cluster}}.benchmark.tsv"
         threads: 1 + PIPE.params[step.variant].training.loader_workers  # one core trains, the others build batches
+        priority:  # bound per variant: a bare `step` would be the loop's last when Snakemake calls it
+            lambda wildcards, kc=PIPE.params[step.variant].clustering.n_clusters: 1 + kc - int(wildcards.cluster)
         resources:
             gpu=wf.gpus(PIPE.params[step.variant].training.device),
         conda:

@@ -64,7 +64,8 @@ def fit_clusters(features: np.ndarray, config: ClusteringConfig, seed: int) -> C
     At most `max_samples` rows (a seeded uniform subset) are used: PCA and centres of a few hundred thousand
     samples are as good as of millions, at a fraction of the time. Imbalance guard: when the smallest cluster
     holds < 1 % of the samples, k-means is run once more on the samples outside it; the new centres then
-    assign every sample (including the outliers that formed the small cluster).
+    assign every sample (including the outliers that formed the small cluster). Clusters are numbered by size,
+    largest first.
     """
     features = np.asarray(features, dtype=np.float64)
     n_clusters, restarts, max_samples = config.n_clusters, config.restarts, config.max_samples
@@ -87,6 +88,10 @@ def fit_clusters(features: np.ndarray, config: ClusteringConfig, seed: int) -> C
     counts = np.bincount(labels, minlength=n_clusters)
     if counts.min() < MIN_CLUSTER_FRACTION * len(scores):
         centres = kmeans(scores[labels != counts.argmin()], n_clusters, restarts, rng)
+    # Number the clusters by size, largest first: cluster 0's training is the longest job, and the workflow
+    # starts the training jobs in cluster order so that it does not run last, alone.
+    counts = np.bincount(nearest(scores, centres), minlength=n_clusters)
+    centres = centres[np.argsort(-counts, kind="stable")]
     return ClusterModel(mean=mean, components=components, centres=centres)
 
 

@@ -19,8 +19,8 @@ from refinenet.features.cache import Features
 from refinenet.geometry.frames import to_world
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.dataset import make_inputs, prepare
-from refinenet.network.devices import resolve_device
-from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm
+from refinenet.network.devices import resolve_device, resolve_precision
+from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm, reduced_precision
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
 
 
@@ -59,14 +59,16 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
 
 
 def load_networks(folders: Sequence[str | Path], network: NetworkConfig, device: str,
-                  fuse: bool = True) -> dict[int, RefineNet]:
+                  fuse: bool = True, precision: str = "float32") -> dict[int, RefineNet]:
     """The best weights of every trained cluster, in eval mode on `device`; `folders[c]` is the output folder of
     cluster c's training (`training.train_cluster`).
 
     Clusters marked empty are left out (refine_normals keeps their first normals). `fuse` folds BN into the
-    preceding Linear layers: equal outputs up to float rounding, faster (`model.fuse_batch_norm`).
+    preceding Linear layers: equal outputs up to float rounding, faster (`model.fuse_batch_norm`). `precision`
+    (`InferenceConfig.precision`) is that of the feature modules (`model.reduced_precision`).
     """
     device = resolve_device(device)
+    precision = resolve_precision(precision, device)
     networks = {}
     for c, folder in enumerate(map(Path, folders)):
         best = folder / BEST
@@ -80,5 +82,5 @@ def load_networks(folders: Sequence[str | Path], network: NetworkConfig, device:
         net = RefineNet(network)
         net.load_state_dict(saved["model"])
         net = net.to(device).eval()
-        networks[c] = fuse_batch_norm(net) if fuse else net
+        networks[c] = reduced_precision(fuse_batch_norm(net) if fuse else net, precision)
     return networks

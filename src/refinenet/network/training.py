@@ -41,7 +41,7 @@ from refinenet.config import LOSSES as LOSS_NAMES
 from refinenet.config import PatchConfig, TrainConfig
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.dataset import ClusterData, PreparedCloud
-from refinenet.network.devices import resolve_device
+from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.model import NetworkConfig, RefineNet
 
 LOSSES = dict(zip(LOSS_NAMES, (F.mse_loss, F.l1_loss), strict=True))
@@ -65,6 +65,8 @@ class TrainResult:
     """True when patience ran out before max_epochs."""
     empty: bool
     """True when the cluster had too few points and only empty.json was written."""
+    precision: str = "float32"
+    """The precision the passes computed in (`TrainConfig.precision` resolved on this machine)."""
 
 
 def cluster_dir(model_dir: str | Path, cluster: int) -> Path:
@@ -150,6 +152,7 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
     """The epoch loop of `train_cluster` for a non-empty cluster."""
     n_train = len(data.train)
     device = resolve_device(config.device)
+    precision = resolve_precision(config.precision, device)
     torch.manual_seed(config.seed)
     model = RefineNet(network).to(device)
     optimizer = _optimizer(config, model)
@@ -180,8 +183,8 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
                        disable=not progress)
         steps = n_train // batch_size
         rates = [learning_rate(config, epoch, step, steps) for step in range(steps)]
-        train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, rates, device)
-        angles = _validate(model, data, network, config, device)
+        train_loss = _train_epoch(model, optimizer, LOSSES[config.loss], batches, rates, device, precision)
+        angles = _validate(model, data, network, config, device, precision)
         row = {"epoch": epoch, "train_loss": train_loss, "val_mean_deg": float(angles.mean()),
                "val_rmse_deg": float(np.sqrt(np.mean(angles ** 2))), "seconds": time.perf_counter() - start}
         if row["val_rmse_deg"] < state["best_val_rmse_deg"]:
@@ -203,7 +206,7 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
             shutil.copyfile(best, tmp)
     return TrainResult(epochs=state["epoch"], best_epoch=state["best_epoch"],
                        best_val_rmse_deg=state["best_val_rmse_deg"],
-                       stopped_early=state["epoch"] < config.max_epochs, empty=False)
+                       stopped_early=state["epoch"] < config.max_epochs, empty=False, precision=precision)
 
 
 def _optimizer(config: TrainConfig, model: torch.nn.Module) -> torch.optim.Optimizer:
@@ -230,8 +233,14 @@ def _digest(*arrays: np.ndarray) -> str:
     return h.hexdigest()[:16]
 
 
+def _autocast(device: torch.device, precision: str) -> torch.autocast:
+    """The forward passes in `precision` (bfloat16: autocast, which keeps weights, gradients and the optimiser
+    state in float32 and runs the matrix products and convolutions in bfloat16)."""
+    return torch.autocast(device.type, dtype=torch.bfloat16, enabled=precision == "bfloat16")
+
+
 def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: Any, batches: tqdm,
-                 rates: Sequence[float], device: torch.device) -> float:
+                 rates: Sequence[float], device: torch.device, precision: str) -> float:
     """One pass over the training batches (a tqdm-wrapped `ClusterData.batches`), step i at learning rate
     rates[i]; the mean loss per sample."""
     model.train()
@@ -241,7 +250,9 @@ def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: An
             group["lr"] = rate
         target = torch.from_numpy(inputs.target).to(device)
         optimizer.zero_grad(set_to_none=True)
-        loss = loss_fn(model(*inputs.tensors(device)), target)
+        with _autocast(device, precision):
+            out = model(*inputs.tensors(device))
+        loss = loss_fn(out.float(), target)
         loss.backward()
         optimizer.step()
         total += loss.item() * len(inputs)
@@ -251,15 +262,15 @@ def _train_epoch(model: RefineNet, optimizer: torch.optim.Optimizer, loss_fn: An
 
 
 def _validate(model: RefineNet, data: ClusterData, network: NetworkConfig, config: TrainConfig,
-              device: torch.device) -> np.ndarray:
+              device: torch.device, precision: str) -> np.ndarray:
     """Unoriented angles (degrees) between predictions and targets on the validation samples; the same ball
     subsets every epoch (the same seed), so epochs are compared on the same inputs."""
     model.eval()
     angles = []
-    with torch.inference_mode():
+    with torch.inference_mode(), _autocast(device, precision):
         for inputs in data.batches(data.val, config.batch_size, network, (config.seed,), shuffle=False,
                                    drop_last=False, workers=config.loader_workers):
-            out = model(*inputs.tensors(device)).cpu().numpy()
+            out = model(*inputs.tensors(device)).float().cpu().numpy()
             angles.append(unoriented_angles(out, inputs.target))
     return np.concatenate(angles)
 
