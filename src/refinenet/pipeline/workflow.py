@@ -175,6 +175,9 @@ TABLES = {
     "table_clusters": Table(tuple(refinenet(v) for v in (FULL, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
                             ("mean", "rmse"), "Number of clusters Kc: unoriented angular error (degrees)",
                             sweep=("clustering.n_clusters", "Kc")),
+    "table_seeds": Table(tuple(refinenet(v) for v in (FULL, "seed2023", "seed2024")), ("mean", "rmse"),
+                         "Refine-Net under three seeds of its clustering, training and inference: unoriented angular "
+                         "error (degrees)", sweep=("seed", "seed")),
 }
 
 
@@ -439,7 +442,6 @@ class Pipeline:
                   for name, files in [*((n, rel(Table.files(n))) for n in TABLES),
                                       *([(DENOISE_TABLE, rel(Table.files(DENOISE_TABLE)))] if denoise else []),
                                       ("table_time", rel(TIME_FILES)), ("table_architecture", rel(ARCHITECTURE_FILES))]]
-        sweep = rel({"png": Table.files("table_clusters", TABLES["table_clusters"])["plot"]})
         figures = [
             FigureEntry("normals_and_errors", **_figure(rel(FIGURE_NORMALS)), caption=(
                 "[P] fig:syn / fig:insight: normals as RGB and unoriented angular-error heat maps of "
@@ -461,8 +463,9 @@ class Pipeline:
             FigureEntry("l1_against_l2", **_figure(rel(FIGURE_LOSS)), caption=(
                 "[P] fig:loss2: one test shape at increasing noise, each point blue where Refine-Net trained with L1 "
                 "has the lower error and red where the L2 (mse) network has; the share of blue points in each title.")),
-            FigureEntry("table_clusters", **_figure(sweep),
-                        caption="The Kc sweep: Average mean error against the number of clusters (table_clusters)."),
+            *(FigureEntry(name, **_figure(rel({"png": Table.files(name, table)["plot"]})),
+                          caption=f"The {table.sweep[1]} sweep: Average mean error against {table.sweep[1]} ({name}).")
+              for name, table in TABLES.items() if table.sweep),
             *(FigureEntry(f"training_{v}", **_figure(rel({"png": FIGURE_TRAINING.format(variant=v)})),
                           caption=f"Training loss and validation error per epoch of every cluster of variant {v}.")
               for v in self.trained),
