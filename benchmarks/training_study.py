@@ -120,8 +120,11 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
     if not results:
         return []
     t = params.training
+    # The precision the jobs resolved on their machine (`auto` is bfloat16 only on a CPU that has it natively).
+    precisions = sorted({json.loads(path.read_text()).get("precision", "float32") for path in results})
     lines = ["", f"## The run's own training ({t.optimizer}, lr {t.lr}, {t.lr_schedule}, batch {t.batch_size}, "
-             f"{t.max_epochs} epochs, at most {t.max_train_points_per_cloud} points per cloud)", "",
+             f"{t.max_epochs} epochs, at most {t.max_train_points_per_cloud} points per cloud, "
+             f"{' and '.join(precisions)})", "",
              f"The run given (profile `{params.profile}`): the pipeline's training jobs, one thread each, two at a "
              "time. *Last change*: the last epoch's change of the validation mean.", "",
              "| cluster | train / val points | input val mean / RMSE | val mean per epoch | kept mean / RMSE "
