@@ -124,10 +124,15 @@ def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: 
     return rows
 
 
+def table_categories(table: pd.DataFrame) -> list[str]:
+    """The categories of a category table (`aggregate`), in its column order, without the Average."""
+    return [c for c in dict.fromkeys(table.columns.get_level_values(0)) if c != "Average"]
+
+
 def with_best_pca(table: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
     """The category table with a "PCA (best k)" row: per category the k of lowest mean error (all its metrics),
     the Average the mean over the categories; and the k chosen per category."""
-    categories = [c for c in dict.fromkeys(table.columns.get_level_values(0)) if c != "Average"]
+    categories = table_categories(table)
     best = {c: min(PCA_KS, key=lambda k: table.loc[f"pca{k}", (c, "mean")]) for c in categories}
     row = {(c, m): table.loc[f"pca{best[c]}", (c, m)] for c in categories for m in METRICS}
     row |= {("Average", m): float(np.mean([row[(c, m)] for c in categories])) for m in METRICS}
@@ -137,7 +142,7 @@ def with_best_pca(table: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
 
 def verdicts(table: pd.DataFrame) -> dict[str, dict[str, object]]:
     """Per category: Refine-Net's mean error, each rival's, and whether Refine-Net is below all of them."""
-    categories = [c for c in dict.fromkeys(table.columns.get_level_values(0)) if c != "Average"]
+    categories = table_categories(table)
     out = {}
     for c in categories:
         ours, rivals = table.loc["refinenet", (c, "mean")], {r: table.loc[r, (c, "mean")] for r in RIVALS}
