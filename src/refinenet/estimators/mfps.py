@@ -76,6 +76,10 @@ class Candidacy:
     top: float
     threshold: float
 
+    def candidates(self, raw: np.ndarray) -> np.ndarray:
+        """Whether each point of `raw` (its `raw_variation`) is a near-feature candidate: tau_s < s."""
+        return _normalised(raw, self.top) > self.threshold
+
 
 def cloud_candidacy(raw: np.ndarray, config: MFPSConfig) -> Candidacy:
     """Candidacy of a cloud from the `raw_variation` of all its points."""
@@ -471,7 +475,7 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
         eigenvalues, normals = smallest_eigenvectors(covs)
         raw = raw_variation(eigenvalues)
         candidacy = cloud_candidacy(raw, config) if candidacy is None else candidacy
-        candidates = np.flatnonzero(_normalised(raw, candidacy.top) > candidacy.threshold)
+        candidates = np.flatnonzero(candidacy.candidates(raw))
         candidate = np.zeros(len(points), dtype=bool)
         candidate[candidates] = True
     stats["candidates"] = len(candidates)
