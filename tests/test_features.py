@@ -1,4 +1,5 @@
-"""The per-cloud feature cache: shapes and types for X = 9 and 8, the options, and the .npz round trip.
+"""The per-cloud feature cache: shapes and types for X = 9, 8 and 10 (a wide PCA normal), the options, and the
+.npz round trip.
 
 `noisy_cube` is shared with the clustering, dataset, training and inference tests.
 """
@@ -37,10 +38,10 @@ def cube() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return noisy_cube(1500)
 
 
-@pytest.mark.parametrize("include_initial, x", [(True, 9), (False, 8)])
-def test_shapes_and_types(cube, include_initial, x):
+@pytest.mark.parametrize("include_initial, pca_k, x", [(True, None, 9), (False, None, 8), (True, 100, 10)])
+def test_shapes_and_types(cube, include_initial, pca_k, x):
     points, _, initial = cube
-    config = feature_config(include_initial=include_initial)
+    config = feature_config(include_initial=include_initial, pca_k=pca_k)
     features = compute_features(points, initial, config)
     n = len(points)
     assert config.n_normals == features.n_normals == x
@@ -50,6 +51,20 @@ def test_shapes_and_types(cube, include_initial, x):
     np.testing.assert_allclose(np.linalg.det(features.frames), 1.0, atol=1e-5)  # canonical frames
     if include_initial:
         np.testing.assert_array_equal(features.n_first, initial.astype(np.float32))
+
+
+def test_the_wide_pca_normal_comes_last_on_the_first_normals_side(cube):
+    """pca_k appends PCA's normal of k neighbours: on a face of the cube, away from the edges, it is the face's
+    normal, and it never points against n_first (the filtered normals' sign rule)."""
+    points, truth, initial = cube
+    plain = compute_features(points, initial, feature_config())
+    wide = compute_features(points, initial, feature_config(pca_k=20))
+    np.testing.assert_array_equal(wide.nf[:, :27], plain.nf)
+    extra = wide.nf[:, 27:].astype(np.float64)
+    assert (np.einsum("ij,ij->i", extra, wide.n_first) >= 0).all()
+    inner = (np.abs(points - 0.5) < 0.3).sum(axis=1) == 2  # on a face, at least 0.2 from its edges
+    angles = np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", extra[inner], truth[inner])), 0, 1)))
+    assert inner.sum() > 300 and angles.mean() < 1.5 and angles.max() < 5.0  # noise 0.5% of l_d, k = 20
 
 
 def test_height_chunks_and_extent_match_one_direct_call(cube, monkeypatch):
@@ -111,7 +126,8 @@ def test_bad_cache_file_is_an_input_error(tmp_path):
 
 
 @pytest.mark.parametrize("field, value", [("frame_mode", "random"), ("hmp_size", 6), ("r_f", 0.0),
-                                          ("sigma_r", ()), ("heights_dtype", "int8"), ("hmp_extent", -1.0)])
+                                          ("sigma_r", ()), ("heights_dtype", "int8"), ("hmp_extent", -1.0),
+                                          ("pca_k", 2)])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         feature_config(**{field: value})

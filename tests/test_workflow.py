@@ -116,6 +116,14 @@ def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
     assert not any(k.startswith("variants") for k in workflow.tracked_keys(raw, STEPS["training"]))
 
 
+def test_a_wide_pca_input_is_a_variant_of_the_features_on_mfps_normals():
+    """pca_input adds a K = 100 PCA normal to MFPS's inputs: every per-variant step its own, full's MFPS normals
+    read, one more normal per point (X = 10) for its networks."""
+    assert set(PIPELINE.owners["pca_input"].values()) == {"pca_input"}
+    assert STEPS["features_pca_input"].deps == STEPS["features"].deps
+    assert PIPELINE.params["pca_input"].features.n_normals == PIPELINE.full.features.n_normals + 1 == 10
+
+
 def test_refining_another_estimator_trains_on_its_normals(tmp_path):
     """pca_init refines PCA's normals: its features start from them (so every per-variant step is its own), and PCA
     runs on the training clouds too, a step of its own that exists only while some variant needs it. A folder of

@@ -197,6 +197,10 @@ class FeatureConfig:
     """The normals Refine-Net refines: an estimator of INITIAL_ESTIMATORS (MFPS, the paper's) or a folder holding
     any other estimator's, `<folder>/<split>/<category>/<name>.normals` per cloud ([P] "PCPNet-ms + Refine-Net").
     Releases exported before the key existed were trained on MFPS, hence the default."""
+    pca_k: int | None = None
+    """Beyond the paper: append the PCA normal of this many neighbours to the X normals (X + 1, with its height
+    map), so that the network sees a wide-neighbourhood fit where MFPS's fitting patches are wrong on smooth,
+    curved surfaces (benchmarks/results/smooth_surface.md). None: the paper's X normals."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
@@ -205,6 +209,8 @@ class FeatureConfig:
             raise ValueError(f"initial '{self.initial}' is neither one of {INITIAL_ESTIMATORS} nor an existing folder")
         if not self.r_f > 0:
             raise ValueError(f"r_f must be positive, got {self.r_f}")
+        if self.pca_k is not None and self.pca_k < 3:
+            raise ValueError(f"pca_k must be at least 3 (a plane needs 3 points) or None, got {self.pca_k}")
         for name in ("sigma_s", "sigma_r"):
             values = getattr(self, name)
             if not values or any(not s > 0 for s in values):
@@ -223,7 +229,7 @@ class FeatureConfig:
     @property
     def n_normals(self) -> int:
         """X, the normals per point."""
-        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial)
+        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial) + int(self.pca_k is not None)
 
 
 @dataclass(frozen=True)

@@ -98,7 +98,8 @@ def _margin(points: np.ndarray, tree, params: Params, method: str, runs_mfps: bo
         return radius(neighbourhood_size(params.baselines, method, None))
     margin = MFPS_REACH * radius(params.mfps.k_bw) if runs_mfps else 0.0
     if method == "refinenet":
-        margin += params.features.r_f * length + FEATURE_REACH * radius(max(params.features.hmp_k, params.patches.k))
+        f = params.features
+        margin += f.r_f * length + FEATURE_REACH * radius(max(f.hmp_k, params.patches.k, f.pca_k or 0))
     return margin
 
 

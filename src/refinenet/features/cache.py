@@ -20,6 +20,7 @@ from refinenet.config import FeatureConfig
 from refinenet.data import io
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
+from refinenet.estimators.baselines import pca_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames
@@ -35,7 +36,8 @@ class Features:
     some points (a tile's own points; the scored points of a test cloud, `data.clouds.scored_points`)."""
 
     nf: np.ndarray
-    """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them."""
+    """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them, then the wide
+    PCA normal where `FeatureConfig.pca_k` asks for it."""
     frames: np.ndarray
     """(N, 3, 3) float32: columns [e1 e2 e3] of the normal-tensor frame (§4)."""
     heights: np.ndarray
@@ -87,6 +89,8 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     rows = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
                           sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
+    if config.pca_k is not None:
+        nf = np.hstack([nf, wide_pca_normals(points, nf[:, :3], config.pca_k)])
     frames = normal_frames(nf, config.frame_mode)
     tree = build_tree(points)
     extent = None if config.hmp_extent is None else config.hmp_extent * length
@@ -102,6 +106,13 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
             pass
     return Features(nf=nf[rows], frames=frames[rows].astype(np.float32), heights=heights,
                     centres=None if centres is None else rows)
+
+
+def wide_pca_normals(points: np.ndarray, n_first: np.ndarray, k: int) -> np.ndarray:
+    """(N, 3) float32 PCA normals of k neighbours (`FeatureConfig.pca_k`), each flipped to its n_first's side as
+    the filtered normals are, so that the extra normal carries no sign of its own."""
+    normals = pca_normals(points, min(k, len(points))).astype(np.float32)
+    return normals * np.where(np.einsum("ij,ij->i", normals, n_first) < 0, -1.0, 1.0).astype(np.float32)[:, None]
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:

@@ -162,12 +162,14 @@ TABLES = {
     "table_loss": Table((refinenet("l1"), refinenet(FULL)), ("mean", "rmse"),
                         "Training loss, L1 against L2: unoriented angular error (degrees)",
                         labels=((refinenet("l1"), "L1"), (refinenet(FULL), "L2"))),
-    "table_initial": Table(("pca", refinenet("pca_init"), "jet", refinenet("jet_init"), "mfps", refinenet(FULL)),
+    "table_initial": Table(("pca", refinenet("pca_init"), "jet", refinenet("jet_init"), "mfps", refinenet(FULL),
+                            refinenet("pca_input")),
                            ("mean", "rmse", "pgp10"),
                            "Refine-Net on other initial normals: unoriented angular error (degrees) and PGP10",
                            labels=((refinenet("pca_init"), "PCA + Refine-Net"),
                                    (refinenet("jet_init"), "Jet + Refine-Net"),
-                                   (refinenet(FULL), "MFPS + Refine-Net"))),
+                                   (refinenet(FULL), "MFPS + Refine-Net"),
+                                   (refinenet("pca_input"), "MFPS + Refine-Net, PCA K = 100 input"))),
     "table_pcpnet": Table((*BASELINES, *MFPS_METHODS[:1], REFINENET), ("rmse",),
                           "PCPNet benchmark: RMSE (degrees) on each shape's scored points (its .pidx subset), "
                           "averaged over the shapes of a column",
@@ -299,7 +301,7 @@ _STAGE = ("config", "errors", "atomic", "threads", "pipeline.stage")
 _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn", "geometry.ball")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
-             "data.noise")
+             "data.noise", "estimators.baselines", "data.shapes", "data.meshes")
 _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.devices", "network.training",
             "features.patches", "evaluation.metrics")
 _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipeline.workflow", "estimators.baselines",
@@ -309,8 +311,8 @@ _FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geomet
         "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK, *_TABLE, *_STAGE)
 
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
-_ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size", "network",
-                 "patches")
+_ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size",
+                 "features.pca_k", "network", "patches")
 #: The steps run once per Refine-Net variant, the keys each reads, and the steps whose files it reads. A variant
 #: has its own instance of a step when its overrides reach the step's keys or it has one of an upstream step;
 #: otherwise it uses full's files.
