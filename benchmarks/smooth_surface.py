@@ -12,7 +12,11 @@ and these are scored on each part:
   hybrid input, with the pipeline's inference precision.
 Errors are unoriented angles in degrees, pooled over points.
 
-    python benchmarks/smooth_surface.py [--category SmoothSurface]
+`--run DIR --variant NAME` adds a retrained answer: the Refine-Net normals of variant NAME (e.g. `pca_input`,
+`features.pca_k`) from a finished pipeline run in DIR, scored by the synthetic protocol on every test category
+beside the default run's committed rows (reports/per_cloud/table_synthetic.csv, the same clouds).
+
+    python benchmarks/smooth_surface.py [--category SmoothSurface] [--run DIR --variant NAME]
 
 Writes benchmarks/results/smooth_surface.json and smooth_surface.md.
 """
@@ -26,6 +30,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from machine import machine_info
 
 from refinenet import config as params_lib
@@ -35,8 +40,10 @@ from refinenet.data.clouds import list_clouds, make_cloud
 from refinenet.estimators.baselines import baseline_normals, pca_normals
 from refinenet.estimators.mfps import cloud_candidacy, mfps_normals, point_variation
 from refinenet.evaluation.metrics import unoriented_angles
+from refinenet.evaluation.table import METHOD_NAMES, aggregate, evaluate, to_csv_frame
 from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.release import load_release
+from refinenet.pipeline.workflow import CLOUD, REFINED, REFINENET
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results"
@@ -48,6 +55,8 @@ NAMES = {
     "refinenet_hybrid": "Refine-Net (refining MFPS, PCA K = 100 elsewhere)",
 }
 PARTS = ("all", "candidates", "others")
+#: The default run's per-cloud rows, which a retrained variant is scored beside.
+COMMITTED = ROOT / "reports" / "per_cloud" / "table_synthetic.csv"
 
 
 def evaluate_cloud(points: np.ndarray, truth: np.ndarray, category: str, release) -> tuple[dict, np.ndarray]:
@@ -75,6 +84,31 @@ def pooled(angles: list[np.ndarray], masks: list[np.ndarray]) -> float:
     return float(sum(a[m].sum() for a, m in zip(angles, masks, strict=True)) / n) if n else float("nan")
 
 
+def variant_table(run: Path, variant: str) -> pd.DataFrame:
+    """Mean and RMSE per category of PCA, Jet, MFPS and Refine-Net (committed) and of `variant` from `run`."""
+    committed = pd.read_csv(COMMITTED)
+    keys = [f"test/{c}/{n}" for c, n in committed.drop_duplicates(["category", "cloud"])[["category", "cloud"]]
+            .itertuples(index=False)]
+    clouds = [run / CLOUD.format(cloud=k) for k in keys]
+    ours = evaluate([variant], clouds, {variant: [run / REFINED.format(variant=variant, cloud=k) for k in keys]})
+    rows = committed[committed["method"].isin(["pca", "jet", "mfps", REFINENET])]
+    per_cloud = pd.concat([rows, ours.assign(method=f"{REFINENET} ({variant})")], ignore_index=True)
+    return to_csv_frame(aggregate(per_cloud, "synthetic", ("mean", "rmse")),
+                        {**METHOD_NAMES, f"{REFINENET} ({variant})": f"Refine-Net ({variant})"})
+
+
+def variant_finding(table: pd.DataFrame, variant: str) -> str:
+    """The retrained variant against the default Refine-Net and the baselines, in words from the table."""
+    ours, full = table.loc[f"Refine-Net ({variant})"], table.loc["Refine-Net"]
+    smooth, average = "SmoothSurface/mean", "Average/mean"
+    beaten = [c.split("/")[0] for c in table.columns if c.endswith("/mean") and ours[c] < full[c]]
+    return (f"Retrained on its own inputs, `{variant}` moves Refine-Net's SmoothSurface mean from {full[smooth]:.2f} "
+            f"to {ours[smooth]:.2f} (PCA K = 100: {table.loc['PCA', smooth]:.2f}, Jet: {table.loc['Jet', smooth]:.2f})"
+            f" and the Average mean / RMSE from {full[average]:.2f} / {full['Average/rmse']:.2f} to "
+            f"{ours[average]:.2f} / {ours['Average/rmse']:.2f}; lower mean than the default Refine-Net in: "
+            f"{', '.join(beaten) or 'none'}.")
+
+
 def markdown(record: dict) -> str:
     rows = record["clouds"]
     lines = [
@@ -95,6 +129,20 @@ def markdown(record: dict) -> str:
         "", "## Findings", "", *record["findings"], "",
         f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']} ({record['machine']['cores']} cores).", "",
     ]
+    if "variant" in record:
+        table = pd.DataFrame(record["variant"]["table"]).T
+        lines += [
+            f"## Retrained: variant `{record['variant']['name']}`", "",
+            f"Refine-Net normals of variant `{record['variant']['name']}` from a pipeline run of the same profile "
+            f"(`{record['variant']['run']}`), scored on every test category beside the default run's committed "
+            "rows (`reports/per_cloud/table_synthetic.csv`): mean / RMSE in degrees.", "",
+            "| method | " + " | ".join(dict.fromkeys(c.split("/")[0] for c in table.columns)) + " |",
+            "|---|" + "---|" * (len(table.columns) // 2),
+            *[f"| {m} | " + " | ".join(f"{row[c]:.2f} / {row[c.replace('mean', 'rmse')]:.2f}"
+                                       for c in table.columns if c.endswith("/mean")) + " |"
+              for m, row in table.iterrows()], "",
+            variant_finding(table, record["variant"]["name"]), "",
+        ]
     return "\n".join(lines)
 
 
@@ -122,7 +170,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--category", default="SmoothSurface")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--run", type=Path, help="a finished pipeline run (its repository root) of the same profile")
+    parser.add_argument("--variant", help="the Refine-Net variant of --run to score, e.g. pca_input")
     args = parser.parse_args()
+    if (args.run is None) != (args.variant is None):
+        parser.error("--run and --variant go together")
     precision = resolve_precision(PARAMS.inference.precision, resolve_device(PARAMS.inference.device))
     release = load_release(precision=precision)
     specs = [s for s in list_clouds(PARAMS.data, PARAMS.noise) if s.split == "test" and s.category == args.category]
@@ -150,6 +202,10 @@ def main() -> None:
         "findings": findings(pooled_means, rows), "wall_s": time.perf_counter() - start,
         "machine": machine_info(),
     }
+    if args.run is not None:
+        table = variant_table(args.run, args.variant)
+        record["variant"] = {"name": args.variant, "run": str(args.run), "table": table.T.to_dict()}
+        print(table.round(2).to_string())
     args.out.mkdir(parents=True, exist_ok=True)
     write_text(args.out / "smooth_surface.json", json.dumps(record, indent=2) + "\n")
     write_text(args.out / "smooth_surface.md", markdown(record))
