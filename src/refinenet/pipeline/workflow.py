@@ -169,7 +169,7 @@ TABLES = {
                            labels=((refinenet("pca_init"), "PCA + Refine-Net"),
                                    (refinenet("jet_init"), "Jet + Refine-Net"),
                                    (refinenet(FULL), "MFPS + Refine-Net"),
-                                   (refinenet("pca_input"), "MFPS + Refine-Net, PCA K = 100 input"))),
+                                   (refinenet("pca_input"), "MFPS + Refine-Net (PCA K = 100 input)"))),
     "table_pcpnet": Table((*BASELINES, *MFPS_METHODS[:1], REFINENET), ("rmse",),
                           "PCPNet benchmark: RMSE (degrees) on each shape's scored points (its .pidx subset), "
                           "averaged over the shapes of a column",
