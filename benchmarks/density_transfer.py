@@ -21,14 +21,11 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-from eval_dev_meshes import DEV, GLOBAL_SEED
+from eval_dev_meshes import DEV, noisy_sample
 from machine import machine_info
 
 from refinenet.atomic import write_text
 from refinenet.cli.estimate import estimate_normals
-from refinenet.data.meshes import read_mesh, sample_mesh
-from refinenet.data.noise import add_gaussian_noise, derive_seed
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.release import load_release
@@ -51,11 +48,8 @@ def main() -> None:
     start = time.perf_counter()
     rows = []
     for key in args.meshes:
-        mesh = read_mesh(DEV / key)
         for n in args.points:
-            sample_seed = derive_seed(GLOBAL_SEED, "sample", "dev", key)
-            clean, truth = sample_mesh(*mesh, n, np.random.default_rng(sample_seed))
-            points = add_gaussian_noise(clean, args.noise, derive_seed(GLOBAL_SEED, "noise", "dev", key, args.noise))
+            _, truth, points, _, _ = noisy_sample(key, DEV / key, args.noise, n)
             row = {"mesh": key, "points": n}
             for method in METHODS:
                 normals = estimate_normals(points, release, method, scale=args.scale, workers=args.threads)

@@ -94,13 +94,18 @@ def timed(fn: Callable[[], np.ndarray]) -> tuple[np.ndarray, float, float]:
     return result, time.perf_counter() - start, time.process_time() - cpu
 
 
-def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: int, threads: int,
-                   release) -> list[dict]:
-    """One per-cloud statistics row per method, with timings and near-edge errors."""
+def noisy_sample(key: str, path: Path, noise: float, n_points: int) -> tuple[np.ndarray, ...]:
+    """Clean points, their true normals, the noisy points, and both seeds of one test cloud of mesh `key`."""
     sample_seed = derive_seed(GLOBAL_SEED, "sample", "dev", key)
     noise_seed = derive_seed(GLOBAL_SEED, "noise", "dev", key, noise)
     clean, truth = sample_mesh(*read_mesh(path), n_points, np.random.default_rng(sample_seed))
-    points = add_gaussian_noise(clean, noise, noise_seed)
+    return clean, truth, add_gaussian_noise(clean, noise, noise_seed), sample_seed, noise_seed
+
+
+def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: int, threads: int,
+                   release) -> list[dict]:
+    """One per-cloud statistics row per method, with timings and near-edge errors."""
+    clean, truth, points, sample_seed, noise_seed = noisy_sample(key, path, noise, n_points)
     near = near_edges(clean, truth)
     b = PARAMS.baselines
     jet_k = b.big_noise_k if category == BIG_NOISE else b.jet_k

@@ -23,7 +23,7 @@ from refinenet.errors import InputError
 from refinenet.estimators.baselines import pca_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
-from refinenet.geometry.frames import normal_frames
+from refinenet.geometry.frames import normal_frames, target_sign
 from refinenet.geometry.neighbors import build_tree
 
 #: Points per height-map call: the unit of the progress bar (height_maps bounds its own memory per call).
@@ -111,8 +111,7 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
 def wide_pca_normals(points: np.ndarray, n_first: np.ndarray, k: int) -> np.ndarray:
     """(N, 3) float32 PCA normals of k neighbours (`FeatureConfig.pca_k`), each flipped to its n_first's side as
     the filtered normals are, so that the extra normal carries no sign of its own."""
-    normals = pca_normals(points, min(k, len(points))).astype(np.float32)
-    return normals * np.where(np.einsum("ij,ij->i", normals, n_first) < 0, -1.0, 1.0).astype(np.float32)[:, None]
+    return target_sign(pca_normals(points, min(k, len(points))).astype(np.float32), n_first)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
