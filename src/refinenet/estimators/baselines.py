@@ -43,22 +43,29 @@ def _monomials(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
 
 
 def jet_normals(points: np.ndarray, k: int, degree: int = 2) -> np.ndarray:
-    """Normal of an osculating jet (Cazals & Pouget 2005): a least-squares height function of `degree`.
+    """Normal of an osculating jet (Cazals & Pouget 2005): a least-squares height function of `degree`."""
+    points = np.asarray(points, dtype=np.float64)
+    return jet_fit(points, knn(points, k, tree=build_tree(points))[1], degree)[0]
+
+
+def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """Normals (M, 3) and RMS height residuals (M,), in the cloud's units, of the jets of the neighbourhoods
+    `points[idx]` (M, k), each taken at its first point (the query point of a kNN list).
 
     Each neighbourhood is expressed in its PCA frame centred on the query point, scaled to unit size, and
-    fitted with z = sum a_ij x^i y^j; the normal at the origin is (-a_x, -a_y, 1) mapped back to world.
+    fitted with z = sum a_ij x^i y^j; the normal at the origin is (-a_x, -a_y, 1) mapped back to world. The
+    residual's squares are divided by k minus the number of coefficients (at least 1; an exact fit has none), so
+    that on a noisy plane it estimates the noise's standard deviation.
     """
-    points = np.asarray(points, dtype=np.float64)
     n_coef = (degree + 1) * (degree + 2) // 2
+    m, k = idx.shape
     if k < n_coef:
         raise ValueError(f"jet of degree {degree} needs k >= {n_coef} neighbours, got k = {k}")
-    tree = build_tree(points)
-    _, idx = knn(points, k, tree=tree)
     _, covs = covariances(points, idx)
     _, frames = np.linalg.eigh(covs)  # columns: normal-like axis first, then the two tangent axes
-    normals = np.empty_like(points)
-    for sl in chunks(len(points), k):
-        local = points[idx[sl]] - points[sl, None, :]
+    normals, residuals = np.empty((m, 3)), np.empty(m)
+    for sl in chunks(m, k):
+        local = points[idx[sl]] - points[idx[sl, 0], None, :]
         uvw = np.einsum("nkj,nji->nki", local, frames[sl])  # coordinates along (e1, e2, e3)
         scale = np.linalg.norm(uvw, axis=2).max(axis=1)[:, None]
         scale[scale == 0] = 1.0
@@ -70,4 +77,6 @@ def jet_normals(points: np.ndarray, k: int, degree: int = 2) -> np.ndarray:
         local_normal = np.stack([np.ones(len(coef)), -coef[:, 1], -coef[:, 2]], axis=1)
         world = np.einsum("nij,nj->ni", frames[sl], local_normal)
         normals[sl] = world / np.linalg.norm(world, axis=1, keepdims=True)
-    return normals
+        heights = z - np.einsum("nki,ni->nk", a, coef)
+        residuals[sl] = scale[:, 0] * np.sqrt((heights ** 2).sum(axis=1) / max(k - n_coef, 1))
+    return normals, residuals

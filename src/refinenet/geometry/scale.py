@@ -30,10 +30,16 @@ def neighbour_distance(points: np.ndarray, k: int, quantile: float = 0.5, tree: 
     subset of SPACING_SAMPLES points."""
     points = np.asarray(points, dtype=np.float64)
     tree = tree if tree is not None else build_tree(points)
-    rng = np.random.default_rng(seed)
-    sample = points if len(points) <= SPACING_SAMPLES else points[rng.choice(len(points), SPACING_SAMPLES,
-                                                                             replace=False)]
+    sample = points[sample_rows(len(points), seed)]
     return float(np.quantile(tree.query(sample, min(k + 1, len(points)), workers=-1)[0][:, -1], quantile))
+
+
+def sample_rows(n_points: int, seed: int = 0) -> np.ndarray | slice:
+    """The rows of a cloud that a whole-cloud statistic is measured on: a seeded uniform subset of SPACING_SAMPLES,
+    or every row of a smaller cloud."""
+    if n_points <= SPACING_SAMPLES:
+        return slice(None)
+    return np.random.default_rng(seed).choice(n_points, SPACING_SAMPLES, replace=False)
 
 
 def point_spacing(points: np.ndarray, tree: cKDTree | None = None) -> float:
