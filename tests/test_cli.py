@@ -190,6 +190,8 @@ def test_console_script_is_installed():
     (["--method", "pca", "-o", "{tmp}/out.las"], "unsupported output type '.las'"),
     (["--method", "pca", "--initial", "{tmp}/x.normals", "-o", "{tmp}/out.ply"], "cannot be used with --method pca"),
     (["-o", "{tmp}/out.ply", "--tile-points", "0"], "--tile-points: must be at least 1"),
+    (["-o", "{tmp}/out.ply", "--strata", "0"], "--strata: must be 'auto' or a whole number of at least 1"),
+    (["-o", "{tmp}/out.ply", "--strata", "many"], "--strata: must be 'auto' or a whole number of at least 1"),
     (["-o", "{tmp}/out.ply", "--release", "{tmp}"], "no trained networks here"),
     (["-o", "{tmp}/few.xyz"], "few.xyz"),
 ])
@@ -202,6 +204,14 @@ def test_bad_arguments_fail_in_one_line_and_write_nothing(tmp_path, args, proble
     assert run.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: "), run.stderr
     assert problem in lines[0]
     assert set(tmp_path.iterdir()) == before
+
+
+def test_strata_too_small_for_the_neighbourhood_fail_in_one_line(tmp_path):
+    source = tmp_path / "t.xyz"
+    np.savetxt(source, terrain(3000))
+    run = cli("normals", source, "-o", tmp_path / "out.ply", "--method", "pca", "--strata", "40")
+    assert run.returncode == 2 and run.stderr.startswith("error: --strata: 40 subsets of 3,000 points"), run.stderr
+    assert not (tmp_path / "out.ply").exists()
 
 
 def test_too_few_points_names_the_neighbourhood(tmp_path):

@@ -1,9 +1,10 @@
 """Normals of a user's cloud, any size: the chain behind `refinenet normals`.
 
-Initial normals (MFPS, or any estimator's through `initial`), the feature cache and the shipped networks, run tile
-by tile (`geometry.tiles`) so that memory is bounded by the tile, not the cloud. Every whole-cloud quantity is
-computed once and handed to each tile: the length unit l_d (`geometry.scale`), MFPS's candidacy statistics, and
-each point's id for MFPS's random trials. With a margin that covers the farthest neighbourhood chain, a tile then
+Initial normals (MFPS, or any estimator's through `initial`), the feature cache and the shipped networks, run on
+interleaved subsets of a cloud that is denser than its noise allows (`estimators.strata`), and tile by tile
+(`geometry.tiles`) so that memory is bounded by the tile, not the cloud. Every whole-cloud quantity is computed
+once and handed to each tile: the length unit l_d (`geometry.scale`), MFPS's candidacy statistics, and each
+point's id for MFPS's random trials. With a margin that covers the farthest neighbourhood chain, a tile then
 gives its points the normals the whole cloud gives them.
 """
 
@@ -16,6 +17,7 @@ from refinenet.config import InferenceConfig, Params
 from refinenet.data.noise import bbox_diagonal
 from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
 from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
+from refinenet.estimators.strata import strata, strata_needed
 from refinenet.features.cache import compute_features
 from refinenet.geometry.neighbors import build_tree
 from refinenet.geometry.scale import neighbour_distance, spacing_unit
@@ -48,20 +50,47 @@ def min_points(params: Params, method: str, refine_initial: bool) -> int:
     return mfps if method == "mfps" else max(mfps, network)
 
 
+def noise_limit(params: Params) -> float:
+    """The relative noise (`estimators.strata.relative_noise`) a stratum may have: the largest test noise of the
+    benchmark (BigNoise's 0.5% of the diagonal at the training density). The training's largest, 0.3%, splits
+    clouds that are better whole (benchmarks/results/strata.md)."""
+    return max(max(levels) for levels in params.noise.test.values())
+
+
+def auto_strata(points: np.ndarray, release: Release, method: str, refine_initial: bool) -> int:
+    """How many interleaved subsets `method` estimates the cloud as: for Refine-Net as many as bring each subset's
+    noise within `noise_limit`, the networks' training; 1 for the estimators alone, which learned nothing (MFPS
+    whole is better than MFPS on strata at these limits: benchmarks/results/strata.md)."""
+    if method != "refinenet":
+        return 1
+    return strata_needed(points, release.spacing_ratio, noise_limit(release.params),
+                         min_points(release.params, method, refine_initial))
+
+
 def estimate_normals(points: np.ndarray, release: Release, method: str = "refinenet",
                      initial: np.ndarray | None = None, scale: str = "spacing", device: str = "auto",
-                     tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False) -> np.ndarray:
+                     tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False,
+                     n_strata: int | None = None) -> np.ndarray:
     """Unit, unoriented normals (N, 3) of a cloud by `method`, with the release's settings (and networks).
 
     `initial` (N, 3) replaces MFPS as the normals Refine-Net refines. `scale` picks l_d: the point spacing
-    calibrated on the training clouds, or the paper's bounding-box diagonal.
+    calibrated on the training clouds, or the paper's bounding-box diagonal. `n_strata` interleaved subsets are
+    estimated on their own (None: `auto_strata`'s choice).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
     if scale not in SCALES:
         raise ValueError(f"unknown scale {scale!r} (one of {', '.join(SCALES)})")
-    params = release.params
     points = np.ascontiguousarray(points, dtype=np.float64)
+    if n_strata is None:
+        n_strata = auto_strata(points, release, method, initial is not None)
+    if n_strata > 1:
+        normals = np.empty_like(points)
+        for rows in tqdm(strata(len(points), n_strata), desc="strata", unit="stratum", disable=not progress):
+            normals[rows] = estimate_normals(points[rows], release, method, None if initial is None else initial[rows],
+                                             scale, device, tile_points, workers, progress, n_strata=1)
+        return normals
+    params = release.params
     tree = build_tree(points)
     length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)
     runs_mfps = method == "mfps" or (method == "refinenet" and initial is None)

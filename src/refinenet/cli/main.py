@@ -52,6 +52,10 @@ def parser() -> argparse.ArgumentParser:
     normals.add_argument("--scale", default="spacing", choices=("spacing", "diagonal"),
                          help="length unit of the radii: from the point spacing (default, any size and units) or "
                               "the bounding-box diagonal (the paper's, for whole objects)")
+    normals.add_argument("--strata", default="auto", metavar="auto|S",
+                         help="estimate the cloud as S interleaved random subsets, for a cloud denser than its noise "
+                              "allows (auto: for refinenet as many as bring each subset's noise within what the "
+                              "networks know, 1 for the other methods; 1: the whole cloud at once)")
     normals.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
                          help="where the networks run (auto: CUDA when present)")
     normals.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
@@ -122,7 +126,7 @@ def normals(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from refinenet.cli.estimate import TILE_POINTS, estimate_normals, min_points
+    from refinenet.cli.estimate import TILE_POINTS, auto_strata, estimate_normals, min_points
     from refinenet.data.io import (
         POINT_FILE_SUFFIXES,
         check_file,
@@ -146,6 +150,8 @@ def normals(args: argparse.Namespace) -> int:
                                        f"{args.method}")
     if args.tile_points is not None and args.tile_points < 1:
         raise InputError("--tile-points", f"must be at least 1, got {args.tile_points}")
+    if args.strata != "auto" and not (args.strata.isdigit() and int(args.strata) >= 1):
+        raise InputError("--strata", f"must be 'auto' or a whole number of at least 1, got {args.strata!r}")
     try:
         device = resolve_device(args.device)
     except ValueError as err:
@@ -153,17 +159,26 @@ def normals(args: argparse.Namespace) -> int:
     precision = resolve_precision(args.precision, device)
     device = str(device)
     release = _release(args, device, with_networks=args.method == "refinenet", precision=precision)
-    cloud = read_cloud(args.input, min_points=min_points(release.params, args.method, args.initial is not None))
+    needed = min_points(release.params, args.method, args.initial is not None)
+    cloud = read_cloud(args.input, min_points=needed)
     initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
     progress = sys.stderr.isatty()
+    if args.strata == "auto":
+        n_strata = auto_strata(cloud.points, release, args.method, initial is not None)
+    elif len(cloud) // int(args.strata) < needed:
+        raise InputError("--strata", f"{args.strata} subsets of {len(cloud):,} points have fewer than the {needed} "
+                                     f"points of {args.method}'s largest neighbourhood")
+    else:
+        n_strata = int(args.strata)
     result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
-                              args.tile_points or TILE_POINTS, args.threads, progress)
+                              args.tile_points or TILE_POINTS, args.threads, progress, n_strata)
     if args.orient == "mst":
         result = orient_mst(cloud.points, result)
     elif args.orient == "viewpoint":
         result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
     write_points(output, cloud.points, result)
     how = f"{precision} features, " if args.method == "refinenet" else ""
+    how += f"{n_strata} strata, " if n_strata > 1 else ""
     print(f"{output}: {len(cloud):,} points, {args.method} normals ({how}{args.orient} orientation) in "
           f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
     return 0

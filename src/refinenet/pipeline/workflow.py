@@ -308,7 +308,8 @@ _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipelin
           "estimators.mfps", *_DATA, *_GEOMETRY)
 #: The figure script's (one for the fig steps; the real-scan figure runs the chain of `refinenet normals`).
 _FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geometry.orientation", "cli.estimate",
-        "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK, *_TABLE, *_STAGE)
+        "estimators.strata", "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK,
+        *_TABLE, *_STAGE)
 
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
 _ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size",

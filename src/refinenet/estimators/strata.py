@@ -1,0 +1,50 @@
+"""Density matching (beyond the paper): a cloud denser than its noise allows is estimated as interleaved subsets.
+
+The networks learned from clouds of a given density and noise. Their neighbourhoods are the k nearest points, which
+shrink as the density grows while the noise does not: on a 100k-point mesh sample with 0.5% noise a 100-point patch
+is, relative to its size, as noisy as one of a 10k-point sample with 1.6% noise, and the shipped networks' error is
+56% above MFPS's there (benchmarks/results/density_transfer.md). `strata_needed` measures the noise of a cloud
+relative to its point spacing and halves the density until it is within a limit; `strata` splits the cloud into
+that many interleaved random subsets (strata), each estimated on its own. Every point keeps its coordinates and
+gets its normal from a subset whose noise the networks know; the subsets' spacing is sqrt(s) times the cloud's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from refinenet.estimators.baselines import jet_fit
+from refinenet.geometry.neighbors import build_tree, knn
+from refinenet.geometry.scale import sample_rows, spacing_unit
+
+#: Neighbours of the degree-2 jets whose residual measures the noise: 16 underestimates it once the noise is a
+#: third of the spacing (the neighbourhood is then a blob), 64 adds the curvature of a 10k-point sample
+#: (benchmarks/results/strata.md).
+NOISE_K = 32
+
+
+def relative_noise(points: np.ndarray, spacing_ratio: float, seed: int = 0) -> float:
+    """The noise of a cloud in percent of its spacing-derived l_d (`geometry.scale.spacing_unit`): the median RMS
+    residual of degree-2 jets fitted to the NOISE_K nearest neighbours of sampled points.
+
+    On a cloud like the training clouds this is their noise in percent of the diagonal, the unit of params.noise.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    tree = build_tree(points)
+    idx = knn(points, NOISE_K, tree=tree, query=points[sample_rows(len(points), seed)], with_distances=False)[1]
+    return 100.0 * float(np.median(jet_fit(points, idx)[1])) / spacing_unit(points, spacing_ratio, tree)
+
+
+def strata(n_points: int, n_strata: int, seed: int = 0) -> list[np.ndarray]:
+    """`n_strata` interleaved random subsets of the rows, as equal in size as can be."""
+    return np.array_split(np.random.default_rng(seed).permutation(n_points), n_strata)
+
+
+def strata_needed(points: np.ndarray, spacing_ratio: float, limit: float, min_points: int) -> int:
+    """The smallest power of two whose strata have a relative noise of at most `limit` percent, or the largest
+    whose strata keep `min_points` points."""
+    n_strata = 1
+    while (len(points) // (2 * n_strata) >= min_points
+           and relative_noise(points[strata(len(points), n_strata)[0]], spacing_ratio) > limit):
+        n_strata *= 2
+    return n_strata
