@@ -19,7 +19,10 @@ protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-wei
 "Near edges" are the points whose 10 nearest clean-sample neighbours include a ground-truth normal more than 30
 degrees away.
 
-    python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2]
+    python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2] [--methods refinenet]
+
+`--methods` reruns only some methods (after a change to Refine-Net, say) and keeps the other methods' rows from
+the committed run (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh and the level.
 
 Writes benchmarks/results/dev_meshes.json and dev_meshes.md. Wall and CPU seconds are recorded for every run (one
 run each), with the load average at start and end.
@@ -66,6 +69,8 @@ PCA_BEST = "pca_best"
 NAMES = {**METHOD_NAMES, **{f"pca{k}": f"PCA k = {k}" for k in PCA_KS}, PCA_BEST: "PCA (best k)"}
 #: The methods Refine-Net must beat in every category.
 RIVALS = (PCA_BEST, "jet", "mfps")
+#: Every method run on each cloud.
+METHODS = (*(f"pca{k}" for k in PCA_KS), "jet", "mfps", "refinenet")
 
 
 def dev_meshes(root: Path) -> list[tuple[str, Path]]:
@@ -103,8 +108,8 @@ def noisy_sample(key: str, path: Path, noise: float, n_points: int) -> tuple[np.
 
 
 def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: int, threads: int,
-                   release) -> list[dict]:
-    """One per-cloud statistics row per method, with timings and near-edge errors."""
+                   release, only: tuple[str, ...] = METHODS) -> list[dict]:
+    """One per-cloud statistics row per method of `only`, with timings and near-edge errors."""
     clean, truth, points, sample_seed, noise_seed = noisy_sample(key, path, noise, n_points)
     near = near_edges(clean, truth)
     b = PARAMS.baselines
@@ -116,8 +121,8 @@ def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: 
         "refinenet": lambda: estimate_normals(points, release, "refinenet", workers=threads),
     }
     rows = []
-    for method, fn in methods.items():
-        normals, wall, cpu = timed(fn)
+    for method in only:
+        normals, wall, cpu = timed(methods[method])
         angles = unoriented_angles(normals, truth)
         row = stats_row(method, category, f"{Path(key).stem}_n{noise}", ErrorStats.from_angles(angles))
         row.update(mesh=Path(key).stem, noise=noise, seconds=wall, cpu_seconds=cpu,
@@ -243,6 +248,26 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
     return "\n".join(lines)
 
 
+def reused_rows(path: Path, methods: list[str], n_points: int) -> pd.DataFrame:
+    """The per-cloud rows of `methods` from an earlier run of the same clouds (same seeds and point count)."""
+    if not methods:
+        return pd.DataFrame()
+    record = json.loads(path.read_text())
+    if record["points"] != n_points or record["global_seed"] != GLOBAL_SEED:
+        raise SystemExit(f"{path}: a run of {record['points']} points, seed {record['global_seed']}; cannot reuse")
+    rows = pd.DataFrame(record["per_cloud"])
+    return rows[rows["method"].isin(methods)]
+
+
+def in_run_order(fresh: pd.DataFrame, kept: pd.DataFrame) -> pd.DataFrame:
+    """The rows of both, cloud by cloud as `fresh` ran them, and within a cloud in METHODS' order."""
+    cloud = ["category", "mesh", "noise"]
+    both = pd.concat([fresh, kept], ignore_index=True)
+    seen = {c: i for i, c in enumerate(dict.fromkeys(fresh[cloud].itertuples(index=False, name=None)))}
+    key = [(seen[tuple(row[:3])], METHODS.index(row[3])) for row in both[[*cloud, "method"]].itertuples(index=False)]
+    return both.iloc[sorted(range(len(both)), key=key.__getitem__)].reset_index(drop=True)
+
+
 def near_edge_means(per_cloud: pd.DataFrame, category: str) -> dict[str, float]:
     """Pooled mean error over the near-edge points of one category, per method."""
     group = per_cloud[per_cloud["category"] == category].groupby("method", sort=False)
@@ -255,14 +280,23 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--meshes", type=Path, default=DEV)
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS),
+                        help="run only these; the other methods' rows come from --reuse")
+    parser.add_argument("--reuse", type=Path, default=RESULTS / "dev_meshes.json",
+                        help="an earlier run's dev_meshes.json whose rows of the methods not run are kept (the same "
+                             "clouds: checked by their seeds and sizes)")
     args = parser.parse_args()
     meshes = dev_meshes(args.meshes)
     precision = resolve_precision("auto", resolve_device("cpu"))
     release = load_release(precision=precision)
+    kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], args.points)
     load_start, start = os.getloadavg()[0], time.perf_counter()
     rows = [row for category, key, path, noise in clouds(meshes)
-            for row in evaluate_cloud(category, key, path, noise, args.points, args.threads, release)]
-    per_cloud = pd.DataFrame(rows)
+            for row in evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
+                                      tuple(args.methods))]
+    per_cloud = in_run_order(pd.DataFrame(rows), kept)
+    if len(per_cloud) != len(clouds(meshes)) * len(METHODS):
+        raise SystemExit(f"{args.reuse}: its rows do not cover every cloud of the methods not run")
     category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
     sharp = category_table[("SharpFeature", "mean")]
     mfps_met = bool(sharp["mfps"] < sharp[PCA_BEST] and sharp["mfps"] < sharp["jet"])
@@ -274,7 +308,8 @@ def main() -> None:
                         f"Jet {sharp['jet']:.2f} ({'met' if mfps_met else 'not met'}).",
         "points": args.points, "noise_percent": {c: list(v) for c, v in PARAMS.noise.test.items()},
         "global_seed": GLOBAL_SEED, "meshes_dir": str(args.meshes.resolve()), "pca_best_k": best_k,
-        "precision": precision,
+        "precision": precision, "methods_run": list(args.methods),
+        "reused_from": str(args.reuse) if len(args.methods) < len(METHODS) else None,
         "per_category": {NAMES[m]: {f"{c}/{k}": float(v) for (c, k), v in row.items()}
                          for m, row in category_table.iterrows()},
         "sharp_near_edges": {"points": int(sharp_rows["near_edge_points"].sum()),
