@@ -94,7 +94,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
         normals = np.empty_like(points)
         for rows in tqdm(strata(len(points), n_strata), desc="strata", unit="stratum", disable=not progress):
             normals[rows] = estimate_normals(points[rows], release, method, None if initial is None else initial[rows],
-                                             scale, device, tile_points, workers, progress, n_strata=1)
+                                             scale, device, tile_points, workers, False, n_strata=1)
         return normals
     params = release.params
     tree = build_tree(points)
