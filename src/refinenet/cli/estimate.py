@@ -59,8 +59,8 @@ def noise_limit(params: Params) -> float:
 
 def auto_strata(points: np.ndarray, release: Release, method: str, refine_initial: bool) -> int:
     """How many interleaved subsets `method` estimates the cloud as: for Refine-Net as many as bring each subset's
-    noise within `noise_limit`, the networks' training; 1 for the estimators alone, which learned nothing (MFPS
-    whole is better than MFPS on strata at these limits: benchmarks/results/strata.md).
+    noise within `noise_limit`, the networks' training; 1 for the estimators alone, which are kept as published
+    (MFPS on strata gains at heavy noise and loses at light noise: benchmarks/results/strata.md).
 
     No stratum has fewer points than a training cloud: the rule is measured up to there, and beyond it a rough
     real surface keeps asking for more (on the street scan rue_madame_28 the relative noise falls by 7% per halving
