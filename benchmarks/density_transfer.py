@@ -6,7 +6,8 @@ k-nearest-neighbour neighbourhoods, which shrink as the density grows while the 
 does not; this measures what that does to the error. Each mesh is sampled area-uniformly with `n` points (seeds as
 in `eval_dev_meshes.py`) and perturbed with Gaussian noise of `--noise` percent of the bounding-box diagonal; MFPS
 and Refine-Net run as `refinenet normals` runs them, with l_d the bounding-box diagonal as in the pipeline
-(`--scale spacing` for the command's default). Errors are unoriented angles in degrees.
+(`--scale spacing` for the command's default); Refine-Net both whole (`--strata 1`) and on the strata the command
+picks (`--strata auto`, `refinenet.estimators.strata`). Errors are unoriented angles in degrees.
 
     python benchmarks/density_transfer.py [--meshes rich/moai.off sharp/coverrear_Lp.off] [--noise 0.5]
         [--points 10000 30000 100000]
@@ -25,13 +26,14 @@ from eval_dev_meshes import DEV, noisy_sample
 from machine import machine_info
 
 from refinenet.atomic import write_text
-from refinenet.cli.estimate import estimate_normals
+from refinenet.cli.estimate import auto_strata, estimate_normals
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.release import load_release
 
 RESULTS = Path(__file__).parent / "results"
-METHODS = ("mfps", "refinenet")
+#: Column -> (method, strata): None is the command's choice.
+RUNS = {"mfps": ("mfps", None), "refinenet_whole": ("refinenet", 1), "refinenet": ("refinenet", None)}
 
 
 def main() -> None:
@@ -50,10 +52,11 @@ def main() -> None:
     for key in args.meshes:
         for n in args.points:
             _, truth, points, _, _ = noisy_sample(key, DEV / key, args.noise, n)
-            row = {"mesh": key, "points": n}
-            for method in METHODS:
-                normals = estimate_normals(points, release, method, scale=args.scale, workers=args.threads)
-                row[method] = float(unoriented_angles(normals, truth).mean())
+            row = {"mesh": key, "points": n, "strata": auto_strata(points, release, "refinenet", False)}
+            for column, (method, n_strata) in RUNS.items():
+                normals = estimate_normals(points, release, method, scale=args.scale, workers=args.threads,
+                                           n_strata=n_strata)
+                row[column] = float(unoriented_angles(normals, truth).mean())
             rows.append(row)
             print(row, flush=True)
     record = {"noise_percent": args.noise, "scale": args.scale, "precision": precision,
@@ -67,8 +70,10 @@ def main() -> None:
         f"sampled at several point counts; MFPS and the shipped networks "
         f"({record['release']['params_fingerprint']}, profile `{record['release']['profile']}`, trained on 10k-point "
         f"procedural clouds), l_d = {args.scale}, precision {precision}. Mean unoriented error in degrees.", "",
-        "| mesh | points | MFPS | Refine-Net | Refine-Net against MFPS |", "|---|---|---|---|---|",
-        *[f"| {r['mesh']} | {r['points']:,} | {r['mfps']:.2f} | {r['refinenet']:.2f} | "
+        "| mesh | points | MFPS | Refine-Net whole | against MFPS | strata | Refine-Net on strata | against MFPS |",
+        "|---|---|---|---|---|---|---|---|",
+        *[f"| {r['mesh']} | {r['points']:,} | {r['mfps']:.2f} | {r['refinenet_whole']:.2f} | "
+          f"{r['refinenet_whole'] / r['mfps'] - 1:+.0%} | {r['strata']} | {r['refinenet']:.2f} | "
           f"{r['refinenet'] / r['mfps'] - 1:+.0%} |" for r in rows], "",
         f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']}.", "",
     ]))
