@@ -41,9 +41,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from bench_mfps import machine, near_edges
+from machine import shipped_networks, write_results
 
 from refinenet import config as params_lib
-from refinenet.atomic import write_text
 from refinenet.cli.estimate import estimate_normals
 from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
 from refinenet.data.noise import add_gaussian_noise, derive_seed
@@ -320,14 +320,12 @@ def main() -> None:
                              "total_points": int(sharp_rows["n"].sum()),
                              "mean": near_edge_means(per_cloud, "SharpFeature")},
         "per_cloud": json.loads(per_cloud.to_json(orient="records")),
-        "release": {k: release.card[k] for k in ("profile", "params_fingerprint")},
+        "release": shipped_networks(release),
         "wall_s": time.perf_counter() - start,
         "load_average_1min": [load_start, os.getloadavg()[0]],
         "machine": machine(args.threads),
     }
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_text(args.out / "dev_meshes.json", json.dumps(record, indent=2) + "\n")
-    write_text(args.out / "dev_meshes.md", markdown(record, per_cloud, category_table))
+    write_results(args.out, "dev_meshes", record, markdown(record, per_cloud, category_table))
     print(to_csv_frame(category_table, NAMES).round(3).to_string())
 
 

@@ -1,11 +1,15 @@
-"""What every benchmark records about the machine it ran on, so results from different runs can be compared."""
+"""What every benchmark records about the machine it ran on (and the shipped networks it ran), so results from
+different runs can be compared, and how it writes them."""
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 from pathlib import Path
 from typing import Any
+
+from refinenet.atomic import write_text
 
 
 def machine_info(**extra: Any) -> dict[str, Any]:
@@ -21,3 +25,15 @@ def machine_info(**extra: Any) -> dict[str, Any]:
         "platform": platform.platform(), "python": platform.python_version(),
         "load_average_1min": os.getloadavg()[0], **extra,
     }
+
+
+def shipped_networks(release) -> dict[str, str]:
+    """The release that ran, as its model card names it: profile and params fingerprint."""
+    return {k: release.card[k] for k in ("profile", "params_fingerprint")}
+
+
+def write_results(out: Path, stem: str, record: dict[str, Any], markdown: str) -> None:
+    """`stem`.json (the record) and `stem`.md (its report) under `out`, each written whole."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(out / f"{stem}.json", json.dumps(record, indent=2) + "\n")
+    write_text(out / f"{stem}.md", markdown)

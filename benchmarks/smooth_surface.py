@@ -24,17 +24,15 @@ Writes benchmarks/results/smooth_surface.json and smooth_surface.md.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from machine import machine_info
+from machine import machine_info, shipped_networks, write_results
 
 from refinenet import config as params_lib
-from refinenet.atomic import write_text
 from refinenet.cli.estimate import estimate_normals
 from refinenet.data.clouds import list_clouds, make_cloud
 from refinenet.estimators.baselines import baseline_normals, pca_normals
@@ -197,7 +195,7 @@ def main() -> None:
     record = {
         "requirement": " ".join(__doc__.split('"')[1].split()),
         "category": args.category, "profile": PARAMS.profile, "n_points": PARAMS.data.n_points,
-        "precision": precision, "release": {k: release.card[k] for k in ("profile", "params_fingerprint")},
+        "precision": precision, "release": shipped_networks(release),
         "candidate_share": float(np.concatenate(masks).mean()), "pooled": pooled_means, "clouds": rows,
         "findings": findings(pooled_means, rows), "wall_s": time.perf_counter() - start,
         "machine": machine_info(),
@@ -206,9 +204,7 @@ def main() -> None:
         table = variant_table(args.run, args.variant)
         record["variant"] = {"name": args.variant, "run": str(args.run), "table": table.T.to_dict()}
         print(table.round(2).to_string())
-    args.out.mkdir(parents=True, exist_ok=True)
-    write_text(args.out / "smooth_surface.json", json.dumps(record, indent=2) + "\n")
-    write_text(args.out / "smooth_surface.md", markdown(record))
+    write_results(args.out, "smooth_surface", record, markdown(record))
     print("\n".join(record["findings"]))
 
 
