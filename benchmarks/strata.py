@@ -1,11 +1,13 @@
 """How many strata does a dense noisy cloud want? MFPS and the shipped networks on development meshes of 100k points
 estimated as s interleaved random subsets, for s = 1, 2, 4, ..., beside the relative noise that `auto_strata`
-reads and the number of strata it picks.
+reads and the number of strata it picks, each with and without the strata's consensus.
 
 Backs the rule of `refinenet.cli.estimate.auto_strata`: the fewest strata (a power of two) whose relative noise, in
-percent of a stratum's spacing-derived l_d, is within the benchmark's largest test noise (`noise_limit`). Clouds
-are sampled and perturbed as in `eval_dev_meshes.py`; MFPS and Refine-Net run as `refinenet normals` runs them
-(l_d from the point spacing) with `n_strata` fixed. Errors are unoriented angles in degrees.
+percent of a stratum's spacing-derived l_d, is within the benchmark's largest test noise (`noise_limit`); and the
+constants of `estimators.strata.consensus` (neighbours per stratum, their cap, the angle gate), with a grid of
+other choices on the same normals. Clouds are sampled and perturbed as in `eval_dev_meshes.py`; MFPS and
+Refine-Net run as `refinenet normals` runs them (l_d from the point spacing) with `n_strata` fixed. Errors are
+unoriented angles in degrees.
 
     python benchmarks/strata.py [--cases rich/moai.off:0.5 ...] [--strata 1 2 4 8 16] [--points 100000]
 
@@ -22,13 +24,15 @@ from eval_dev_meshes import DEV, noisy_sample
 from machine import machine_info, shipped_networks, write_results
 
 from refinenet.cli.estimate import auto_strata, estimate_normals, noise_limit
-from refinenet.estimators.strata import relative_noise, strata
+from refinenet.estimators.strata import CONSENSUS_ANGLE, consensus, consensus_k, relative_noise, strata
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.release import load_release
 
 RESULTS = Path(__file__).parent / "results"
 METHODS = ("mfps", "refinenet")
+#: The consensus choices tried on Refine-Net's strata: neighbours per stratum, and the angle gate in degrees.
+GRID_PER_STRATUM, GRID_ANGLES = (2, 4, 8), (25, 40, 60)
 CASES = ("rich/moai.off:0.1", "rich/moai.off:0.3", "rich/moai.off:0.5", "sharp/coverrear_Lp.off:0.15",
          "sharp/coverrear_Lp.off:0.3", "smooth/duck.off:0.4")
 
@@ -52,9 +56,15 @@ def main() -> None:
         for n_strata in args.strata:
             row = {"mesh": key, "noise": float(noise), "strata": n_strata, "auto": n_strata == chosen,
                    "relative_noise": relative_noise(points[strata(len(points), n_strata)[0]], release.spacing_ratio)}
-            for method in METHODS:
-                normals = estimate_normals(points, release, method, workers=args.threads, n_strata=n_strata)
-                row[method] = float(unoriented_angles(normals, truth).mean())
+            normals = {method: estimate_normals(points, release, method, workers=args.threads, n_strata=n_strata,
+                                                reconcile=False) for method in METHODS}
+            for method, estimate in normals.items():
+                row[method] = float(unoriented_angles(estimate, truth).mean())
+                row[f"{method}_consensus"] = float(unoriented_angles(
+                    consensus(points, estimate, consensus_k(n_strata)), truth).mean())
+            row["grid"] = {f"{per * n_strata}:{angle}": float(unoriented_angles(
+                consensus(points, normals["refinenet"], per * n_strata, angle), truth).mean())
+                for per in GRID_PER_STRATUM for angle in GRID_ANGLES}
             rows.append(row)
             print(row, flush=True)
     record = {"points": args.points, "precision": precision, "limit_percent": noise_limit(release.params),
@@ -67,10 +77,22 @@ def main() -> None:
         f"networks ({record['release']['params_fingerprint']}, profile `{record['release']['profile']}`, trained "
         f"on 10k-point procedural clouds), l_d from the point spacing, precision {precision}. Relative noise: "
         "`estimators.strata.relative_noise` of one stratum, in percent of its l_d. **Bold**: the number of strata "
-        "`auto_strata` picks (the default of `refinenet normals`). Mean unoriented error in degrees.", "",
-        "| mesh | noise % | strata | relative noise | MFPS | Refine-Net | Refine-Net against MFPS at 1 stratum |",
-        "|---|---|---|---|---|---|---|",
+        "`auto_strata` picks (the default of `refinenet normals`). *+ consensus*: the same strata reconciled by "
+        f"`estimators.strata.consensus` (the sign-aligned mean normal of the `consensus_k` = min(4 s, 32) nearest "
+        f"points within {CONSENSUS_ANGLE:g} deg; `refinenet normals` does this whenever s > 1; at s = 1 it is "
+        "shown, not used). Mean unoriented error in degrees.", "",
+        "| mesh | noise % | strata | relative noise | MFPS | MFPS + consensus | Refine-Net | Refine-Net + consensus "
+        "| `refinenet normals` against MFPS at 1 stratum |",
+        "|---|---|---|---|---|---|---|---|---|",
         *[_line(r, rows) for r in rows], "",
+        "## Consensus choices", "",
+        "Refine-Net's strata normals of the table above reconciled over k neighbours (k = 2, 4 or 8 per stratum) "
+        "with angle gates of 25, 40 and 60 deg. Mean unoriented error in degrees; bold: `consensus_k` and the default "
+        "gate (which `refinenet normals` uses when s > 1).", "",
+        "| mesh | noise % | strata | " + " | ".join(f"{p} s, {a} deg" for p in GRID_PER_STRATUM for a in GRID_ANGLES)
+        + " |",
+        "|---|---|---|" + "---|" * (len(GRID_PER_STRATUM) * len(GRID_ANGLES)),
+        *[_grid_line(r) for r in rows], "",
         f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']}.", "",
     ]))
 
@@ -78,8 +100,16 @@ def main() -> None:
 def _line(row: dict, rows: list[dict]) -> str:
     whole = next(r for r in rows if (r["mesh"], r["noise"], r["strata"]) == (row["mesh"], row["noise"], 1))
     strata_cell = f"**{row['strata']}**" if row["auto"] else str(row["strata"])
+    command = row["refinenet_consensus"] if row["strata"] > 1 else row["refinenet"]
     return (f"| {row['mesh']} | {row['noise']} | {strata_cell} | {row['relative_noise']:.3f} | {row['mfps']:.2f} | "
-            f"{row['refinenet']:.2f} | {row['refinenet'] / whole['mfps'] - 1:+.0%} |")
+            f"{row['mfps_consensus']:.2f} | {row['refinenet']:.2f} | {row['refinenet_consensus']:.2f} | "
+            f"{command / whole['mfps'] - 1:+.0%} |")
+
+
+def _grid_line(row: dict) -> str:
+    default = f"{consensus_k(row['strata'])}:{CONSENSUS_ANGLE:g}"
+    cells = [f"**{error:.2f}**" if choice == default else f"{error:.2f}" for choice, error in row["grid"].items()]
+    return f"| {row['mesh']} | {row['noise']} | {row['strata']} | " + " | ".join(cells) + " |"
 
 
 if __name__ == "__main__":

@@ -9,7 +9,7 @@ import pytest
 from refinenet.cli.estimate import auto_strata, estimate_normals
 from refinenet.data.noise import add_gaussian_noise
 from refinenet.data.shapes import sample_shape
-from refinenet.estimators.strata import relative_noise, strata, strata_needed
+from refinenet.estimators.strata import consensus, consensus_k, relative_noise, strata, strata_needed
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.release import SHIPPED, load_release
@@ -48,6 +48,38 @@ def test_strata_needed_halves_the_density_until_the_noise_is_within_the_limit():
     assert strata_needed(points, RATIO, 0.5, 100) == 1
     assert strata_needed(points, RATIO, 0.35, 100) == 4
     assert strata_needed(points, RATIO, 0.35, 15_000) == 2  # 4 strata of 10k points are too small
+
+
+def jittered(normals: np.ndarray, degrees: float, seed: int) -> np.ndarray:
+    """Unit normals each tilted by about `degrees` at random, half of them flipped (estimators are unoriented)."""
+    rng = np.random.default_rng(seed)
+    tilted = normals + np.radians(degrees) * rng.standard_normal(normals.shape)
+    tilted *= rng.choice([-1.0, 1.0], size=(len(normals), 1))
+    return tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
+
+
+def dihedral(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """n points on two unit squares meeting at a right-angled edge (the floor z = 0 and the wall x = 0), with
+    their faces' normals."""
+    rng = np.random.default_rng(2)
+    u, v = rng.random(n), rng.random(n)
+    wall = np.arange(n) % 2 == 1
+    points = np.c_[np.where(wall, 0.0, u), v, np.where(wall, u, 0.0)]
+    return points, np.where(wall[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+
+
+def test_consensus_averages_the_strata_and_keeps_sharp_edges():
+    """Normals 10 deg off at random on a right-angled dihedral: the consensus of 8 strata (32 neighbours) brings
+    the error down to about 10 / sqrt(32) deg, and the points next to the edge keep their own face's normal
+    instead of the 45 deg mean of both faces."""
+    points, truth = dihedral(20_000)
+    noisy = jittered(truth, 10.0, seed=3)
+    agreed = consensus(points, noisy, consensus_k(8))
+    before, after = unoriented_angles(noisy, truth), unoriented_angles(agreed, truth)
+    assert before.mean() == pytest.approx(12.5, rel=0.05)  # the mean of a 2-D Rayleigh of sigma 10 deg
+    assert after.mean() < 0.25 * before.mean()
+    edge = np.maximum(points[:, 0], points[:, 2]) < 0.01
+    assert after[edge].mean() < 0.5 * before[edge].mean()
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ from refinenet.config import InferenceConfig, Params
 from refinenet.data.noise import bbox_diagonal
 from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
 from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
-from refinenet.estimators.strata import strata, strata_needed
+from refinenet.estimators.strata import consensus, consensus_k, strata, strata_needed
 from refinenet.features.cache import compute_features
 from refinenet.geometry.neighbors import build_tree
 from refinenet.geometry.scale import neighbour_distance, spacing_unit
@@ -76,12 +76,13 @@ def auto_strata(points: np.ndarray, release: Release, method: str, refine_initia
 def estimate_normals(points: np.ndarray, release: Release, method: str = "refinenet",
                      initial: np.ndarray | None = None, scale: str = "spacing", device: str = "auto",
                      tile_points: int = TILE_POINTS, workers: int = 1, progress: bool = False,
-                     n_strata: int | None = None) -> np.ndarray:
+                     n_strata: int | None = None, reconcile: bool = True) -> np.ndarray:
     """Unit, unoriented normals (N, 3) of a cloud by `method`, with the release's settings (and networks).
 
     `initial` (N, 3) replaces MFPS as the normals Refine-Net refines. `scale` picks l_d: the point spacing
     calibrated on the training clouds, or the paper's bounding-box diagonal. `n_strata` interleaved subsets are
-    estimated on their own (None: `auto_strata`'s choice).
+    estimated on their own (None: `auto_strata`'s choice), then reconciled by `estimators.strata.consensus` unless
+    `reconcile` is False (benchmarks/strata.py compares both).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
@@ -95,7 +96,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
         for rows in tqdm(strata(len(points), n_strata), desc="strata", unit="stratum", disable=not progress):
             normals[rows] = estimate_normals(points[rows], release, method, None if initial is None else initial[rows],
                                              scale, device, tile_points, workers, False, n_strata=1)
-        return normals
+        return consensus(points, normals, consensus_k(n_strata)) if reconcile else normals
     params = release.params
     tree = build_tree(points)
     length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)

@@ -7,6 +7,8 @@ is, relative to its size, as noisy as one of a 10k-point sample with 1.6% noise,
 relative to its point spacing and halves the density until it is within a limit; `strata` splits the cloud into
 that many interleaved random subsets (strata), each estimated on its own. Every point keeps its coordinates and
 gets its normal from a subset whose noise the networks know; the subsets' spacing is sqrt(s) times the cloud's.
+Each stratum sees only 1/s of the points, so `consensus` then gives every point the mean normal of its nearest
+points of all strata, s nearly independent estimates of the same tangent plane.
 """
 
 from __future__ import annotations
@@ -14,13 +16,19 @@ from __future__ import annotations
 import numpy as np
 
 from refinenet.estimators.baselines import jet_fit
-from refinenet.geometry.neighbors import build_tree, knn
+from refinenet.geometry.neighbors import build_tree, chunks, knn
 from refinenet.geometry.scale import sample_rows, spacing_unit
 
 #: Neighbours of the degree-2 jets whose residual measures the noise. Measured on the moai dev mesh: with 0.5% noise
 #: at 100k points (1.33% of l_d) k = 16 reads 0.75, 32 reads 0.94 (a neighbourhood barely wider than the noise is a
 #: blob); noise-free at 10k points, k = 32 reads 0.08 and 64 reads 0.17 (the surface's curvature).
 NOISE_K = 32
+#: Nearest points per stratum in a consensus, and at most this many in all (benchmarks/results/strata.md).
+CONSENSUS_PER_STRATUM = 4
+CONSENSUS_MAX_K = 32
+#: Neighbours whose normal is further than this from a point's own are taken to lie across a sharp feature and are
+#: left out of its consensus (benchmarks/results/strata.md: 25-60 deg differ by under 0.2 deg of mean error).
+CONSENSUS_ANGLE = 40.0
 
 
 def relative_noise(points: np.ndarray, spacing_ratio: float, seed: int = 0) -> float:
@@ -48,3 +56,22 @@ def strata_needed(points: np.ndarray, spacing_ratio: float, limit: float, min_po
            and relative_noise(points[strata(len(points), n_strata)[0]], spacing_ratio) > limit):
         n_strata *= 2
     return n_strata
+
+
+def consensus_k(n_strata: int) -> int:
+    """The neighbours of a consensus over `n_strata` strata: about 4 of every stratum, at most 32."""
+    return min(CONSENSUS_PER_STRATUM * n_strata, CONSENSUS_MAX_K)
+
+
+def consensus(points: np.ndarray, normals: np.ndarray, k: int, angle: float = CONSENSUS_ANGLE) -> np.ndarray:
+    """Unit normals (N, 3): each the sign-aligned mean of the `normals` of its k nearest points of the whole cloud
+    (itself included) that lie within `angle` degrees of its own (`consensus_k` strata's worth of them)."""
+    idx = knn(points, min(k, len(points)), with_distances=False, index_dtype=np.int32)[1]
+    gate = np.cos(np.radians(angle))
+    agreed = np.empty_like(normals)
+    for rows in chunks(len(points), idx.shape[1]):
+        around = normals[idx[rows]]
+        dots = np.einsum("nkd,nd->nk", around, normals[rows])
+        weights = np.where(np.abs(dots) >= gate, np.sign(dots), 0.0)  # the point itself always counts
+        agreed[rows] = np.einsum("nk,nkd->nd", weights, around)
+    return agreed / np.linalg.norm(agreed, axis=1, keepdims=True)
