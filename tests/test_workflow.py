@@ -20,6 +20,26 @@ FLOORS = ("config", "data", "geometry", "estimators", "features", "evaluation", 
 PACKAGES = {"data", "geometry", "estimators", "features", "evaluation", "network", "pipeline", "cli"}
 
 
+def test_local_runs_select_jobs_only_when_a_job_ends(tmp_path):
+    """Snakemake's job-rate limiter adds a job-selection pass per timer on top of one per job end, and its timers pile
+    up (on the full set Snakemake held 52% of a core); the workflow's onstart hook drops it. 8 one-second jobs on
+    2 cores: with the hook at most one pass per job leaves jobs waiting, without it the timers add more."""
+    jobs = ('rule all:\n    input: expand("out/{i}", i=range(8))\n'
+            'rule wait:\n    output: "out/{i}"\n    shell: "sleep 1; touch {output}"\n')
+
+    def passes(head: str) -> int:
+        run = tmp_path / str(len(head))
+        run.mkdir()
+        (run / "Snakefile").write_text(head + jobs)
+        log = subprocess.run([sys.executable, "-m", "snakemake", "-j2", "--verbose"], cwd=run,
+                             capture_output=True, text=True, check=True)
+        assert len(list((run / "out").iterdir())) == 8
+        return (log.stdout + log.stderr).count("Ready jobs:")
+
+    assert passes(f'include: "{REPO / "workflow/rules/scheduling.smk"}"\n') <= 8
+    assert passes("") > 8
+
+
 def test_dvc_yaml_is_generated_from_the_step_declarations():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     assert (REPO / "dvc.yaml").read_text() == workflow.render_dvc_yaml(raw), "run python -m refinenet.pipeline.workflow"
