@@ -18,7 +18,7 @@ def main(params, args):
     check_array(args.cloud, cloud.points, "points", params.features.hmp_k)
     initial = read_normals(args.initial, len(cloud))
     features = compute_features(cloud.points, initial, params.features, progress=True,
-                                centres=scored_points(cloud.meta))
+                                centres=scored_points(cloud))
     save_features(args.out, features, {"cloud": args.cloud, "initial_normals": args.initial, **cloud.meta})
 
 

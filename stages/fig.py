@@ -1,7 +1,7 @@
 """The paper's figures (docs/algorithm.md §12, Figures), one `--figure` per step:
 * normals (fig:syn / fig:insight): normals of PCA, Jet, MFPS, Refine-Net and the variants asked for as RGB and
-  their angular errors as heat maps on chosen test clouds (a PCPNet shape's scored points only: the network
-  computed no others);
+  their angular errors as heat maps on chosen test clouds (their scored points only: a PCPNet shape's `.pidx`
+  points, the seeded subset that budgeted variants refine; the network computed no others);
 * clusters (fig:cluster): a test cloud coloured by cluster for Kc = 2 and Kc = 4, beside the Kc curve;
 * loss (fig:loss2): one shape at increasing noise, each point blue where the L1 network has the lower error, red
   where the L2 one has;
@@ -100,12 +100,13 @@ def main(params, args):
 
 
 def panels(pipe, clouds, methods):
-    """One panel per test cloud: its scored points (a PCPNet shape's `.pidx` points: the network computed no
-    others), its true normals and the normals of each method, by the name `methods` gives it."""
-    made = []
+    """One panel per test cloud: its scored points (a PCPNet shape's `.pidx` points, and the seeded subset that the
+    methods' variants refine: the network computed no others), its true normals and the normals of each method, by
+    the name `methods` gives it."""
+    made, points = [], pipe.scored_subset(tuple(methods))
     for path in clouds:
         cloud = read_cloud(path)
-        key, scored = cloud_key(path, cloud), scored_points(cloud.meta)
+        key, scored = cloud_key(path, cloud), scored_points(cloud, points)
         rows = slice(None) if scored is None else scored
         estimates = {name: read_normals(pipe.normals_path(m, key), len(cloud), scored) for m, name in methods.items()}
         made.append(Panel(key.removeprefix("test/"), cloud.points[rows], cloud.normals[rows], estimates))

@@ -1,9 +1,10 @@
-"""Refine the normals of one test cloud with the per-cluster networks; write them in the PCPNet format. Points
-without features (not scored: outside a PCPNet shape's `.pidx`) get no network pass and NaN normals."""
+"""Refine the normals of one test cloud with the per-cluster networks; write them in the PCPNet format. Only the
+scored points get a network pass (a PCPNet shape's `.pidx`, and of those a seeded subset of `inference.points`:
+`data.clouds.scored_points`); the others get NaN normals."""
 
 import numpy as np
 
-from refinenet.data.clouds import cloud_key
+from refinenet.data.clouds import cloud_key, scored_points
 from refinenet.data.io import write_normals
 from refinenet.data.noise import derive_seed
 from refinenet.errors import InputError
@@ -25,6 +26,12 @@ def arguments(parser):
 def main(params, args):
     network = architecture(params.network, params.features, params.patches)
     cloud, features = load_for_cloud(args.cloud, args.features)
+    scored = scored_points(cloud, params.inference.points)
+    if scored is not None:
+        rows = np.flatnonzero(np.isin(features.points, scored))
+        if len(rows) != len(scored):
+            raise InputError(args.features, f"features of {len(rows)} of the {len(scored)} scored points")
+        features = features.rows(rows)
     model, _ = load_cluster_model(args.clusters)
     if len(args.networks) != model.n_clusters:
         raise InputError(args.clusters, f"{model.n_clusters} clusters, but {len(args.networks)} network folders")

@@ -35,7 +35,8 @@ def main(params, args):
     tables, figures = pipe.reported()
     settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full)}, sort_keys=False, width=120)
     changes = {v: pipe.changes(v) for v in pipe.params if v != FULL}
-    settings += "\n# Refine-Net variants: what each changes\n" + yaml.safe_dump(changes, sort_keys=False, width=120)
+    settings += ("\n# Refine-Net variants: what each changes (reference: full under the variant budget; the others:\n"
+                 "# from reference)\n" + yaml.safe_dump(changes, sort_keys=False, width=120))
     title = f"Refine-Net reproduction: reports of profile {params.profile}"
     notes = {"Comparison with the paper": os.path.relpath(COMPARISON_FILES["md"], REPORT_DIR)}
     write_text(REPORT_FILES["html"], page(title, data_line(params), tables, figures, notes, settings, REPORT_DIR))

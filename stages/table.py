@@ -22,7 +22,7 @@ def main(params, args):
     methods = list(rows)
     keys = [cloud_key(path, read_cloud(path)) for path in args.clouds]
     normals = {m: [pipe.normals_path(m, key) for key in keys] for m in methods}
-    per_cloud = evaluate(methods, args.clouds, normals)
+    per_cloud = evaluate(methods, args.clouds, normals, pipe.scored_subset(table.methods))
     files = Table.files(args.table, table)
     csv = write_table(per_cloud, pipe.protocol(table), table.metrics, pipe.caption(table), args.table, files,
                       rows)

@@ -17,16 +17,17 @@ def arguments(parser):
     pass
 
 
-def sizes(key):
-    """(key, points, scored points) of a test cloud."""
+def sizes(key, refined):
+    """(key, points, featured points, refined points) of a test cloud, the network refining `refined` of them
+    (`inference.points`)."""
     cloud = read_cloud(CLOUD.format(cloud=key))
-    scored = scored_points(cloud.meta)
-    return key, len(cloud), len(cloud) if scored is None else len(scored)
+    subsets = (None, scored_points(cloud), scored_points(cloud, refined))
+    return key, *(len(cloud) if s is None else len(s) for s in subsets)
 
 
 def main(params, args):
     keys = [c.key for c in clouds(params, "test")]
-    jobs = job_rows([sizes(key) for key in keys], JOB_BENCHMARK)
+    jobs = job_rows([sizes(key, params.inference.points) for key in keys], JOB_BENCHMARK)
     per_cluster = parameters({"full": architecture(params.network, params.features, params.patches)})["full"]
     table = time_table(jobs, per_cluster, params.clustering.n_clusters)
     caption = (f"Time per 1k points (each job's wall time over the points it computed, process start included; CPU "

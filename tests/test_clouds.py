@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 from settings import BASE
 
-from refinenet.data.clouds import CloudSpec, list_clouds, make_cloud, read_scan, scan_files, surface_sample
+from refinenet.data.clouds import (
+    CloudSpec,
+    list_clouds,
+    make_cloud,
+    read_scan,
+    scan_files,
+    scored_points,
+    surface_sample,
+)
 from refinenet.data.io import write_ply
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError, ParamsError
@@ -42,6 +50,26 @@ def test_procedural_cloud_records_its_seeds_and_noise():
     other_level = make_cloud(CloudSpec("test", "SharpFeature", "lblock_a_n0.15", "lblock_a", 0.15), 5000, seed=3)
     displacement = np.linalg.norm(other_level.points - cloud.points, axis=1).mean()
     assert displacement < 0.01 * cloud.meta["l_d"]  # the same clean sample under both noise levels
+
+
+def test_a_scored_subset_is_seeded_by_the_cloud_alone_and_nests():
+    """A test cloud's scored subset of `inference.points`: distinct sorted indices, the same under any run seed
+    (every row of a table scores the same points), a smaller one inside a larger; drawn from a PCPNet .pidx where
+    there is one; none on a training cloud, or where it would cover every point."""
+    spec = CloudSpec("test", "SharpFeature", "lblock_a_n0.10", "lblock_a", 0.10)
+    cloud, reseeded = make_cloud(spec, 1000, seed=3), make_cloud(spec, 1000, seed=2024)
+    small, large = scored_points(cloud, 100), scored_points(cloud, 400)
+    assert len(np.unique(small)) == 100 and np.all(np.diff(small) > 0) and small.max() < 1000
+    np.testing.assert_array_equal(small, scored_points(reseeded, 100))
+    assert set(small) <= set(large) and scored_points(cloud, 1000) is None and scored_points(cloud) is None
+    other = make_cloud(CloudSpec("test", "SharpFeature", "lblock_b_n0.10", "lblock_b", 0.10), 1000, seed=3)
+    assert not np.array_equal(scored_points(other, 100), small)
+    pidx = np.arange(0, 1000, 4)
+    pcpnet = replace(cloud, meta={**cloud.meta, "pidx": pidx.tolist()})
+    np.testing.assert_array_equal(scored_points(pcpnet), pidx)
+    assert set(scored_points(pcpnet, 50)) <= set(pidx) and len(scored_points(pcpnet, 50)) == 50
+    train = make_cloud(CloudSpec("train", "SharpFeature", "lblock_a_n0.10", "lblock_a", 0.10), 1000, seed=3)
+    assert scored_points(train, 100) is None
 
 
 def test_mesh_folder(shared_data):

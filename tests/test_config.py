@@ -98,9 +98,37 @@ def test_a_variant_overrides_the_profile_and_only_its_own_keys():
     smoke = with_value("profile", "smoke")
     full, kc8 = config.resolve(smoke), config.resolve(smoke, variant="kc8")
     assert (full["clustering"]["n_clusters"], kc8["clustering"]["n_clusters"]) == (2, 8)
-    assert kc8["training"] == full["training"]  # the smoke profile's training applies to the variant too
+    reference = config.resolve(smoke, variant="reference")
+    assert kc8["training"] == reference["training"]  # the smoke profile's training applies to the variant too
     assert config.resolve(smoke, variant="l1")["training"]["loss"] == "l1"
-    assert "variants" not in full
+    assert "variants" not in full and "variant_budget" not in full
+
+
+def test_the_variant_budget_reaches_every_variant_and_reference_but_not_full():
+    """The smoke profile's budget (1 epoch, 500 scored points) applies under each variant's own overrides; with no
+    budget, reference is full as written."""
+    smoke = with_value("profile", "smoke")
+    every = config.resolve_variants(smoke)
+    assert (every["full"]["training"]["max_epochs"], every["full"]["inference"]["points"]) == (2, None)
+    for name in ("reference", "l1", "kc8", "seed2023"):
+        assert (every[name]["training"]["max_epochs"], every[name]["inference"]["points"]) == (1, 500), name
+    smoke["variants"]["l1"] = {"training": {"loss": "l1", "max_epochs": 3}}
+    assert config.resolve(smoke, variant="l1")["training"]["max_epochs"] == 3  # a variant's own override wins
+    smoke["profiles"]["smoke"]["variant_budget"] = {}
+    assert config.resolve(smoke, variant="reference") == config.resolve(smoke)
+
+
+def test_a_bad_variant_budget_or_a_variant_named_reference_is_reported_by_its_key():
+    for budget, message in [({"data": {"n_points": 10}}, "variant_budget.data: a variant may override only"),
+                            ({"inference": {"points": 0}}, "variant_budget.inference.points: 0 is less than")]:
+        raw = copy.deepcopy(RAW)
+        raw["variant_budget"] = budget
+        with pytest.raises(ParamsError, match=message):
+            config.resolve(raw)
+    raw = copy.deepcopy(RAW)
+    raw["variants"]["reference"] = {}
+    with pytest.raises(ParamsError, match="variants.reference: is reserved"):
+        config.resolve(raw)
 
 
 @pytest.mark.parametrize(

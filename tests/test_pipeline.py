@@ -20,6 +20,7 @@ from scratch import SHARED, isolated, link_shared, set_param, sh, smoke_copy, sn
 
 from refinenet import config
 from refinenet.data import shapes
+from refinenet.data.clouds import scored_points
 from refinenet.data.io import read_cloud, read_normals
 from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
@@ -27,6 +28,7 @@ from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
 from refinenet.pipeline.workflow import (
     CHECKPOINT_DIR,
+    CLOUD,
     DENOISE_TABLE,
     FULL,
     HISTORY,
@@ -134,6 +136,20 @@ def test_denoising_moves_points_and_measures_the_noisy_input_at_its_noise_level(
         expected = 10 * level * np.sqrt(2 / np.pi)
         assert table.loc["noisy input", f"{category}/mean"] == pytest.approx(expected, rel=0.35), category
     assert (table.to_numpy() > 0).all()
+
+
+def test_the_variants_refine_the_same_seeded_subset_of_each_test_cloud_and_full_every_point(by_snakemake):
+    """The smoke profile's variant budget: every variant, reference (full's settings under it) included, refines
+    the same 500 seeded points of each 1,000-point test cloud, NaN elsewhere; full refines every point."""
+    smoke = Pipeline(config.read_raw(by_snakemake / "params.yaml"))
+    assert smoke.params["reference"].inference.points == 500 and smoke.full.inference.points is None
+    for key in smoke.keys("test"):
+        scored = scored_points(read_cloud(by_snakemake / CLOUD.format(cloud=key)), 500)
+        assert len(scored) == 500
+        for variant in ("reference", "l1", "kc2", "seed2023"):
+            refined = np.loadtxt(by_snakemake / REFINED.format(variant=variant, cloud=key))
+            np.testing.assert_array_equal(np.flatnonzero(np.isfinite(refined).all(axis=1)), scored, err_msg=variant)
+        assert np.isfinite(np.loadtxt(by_snakemake / REFINED.format(variant=FULL, cloud=key))).all()
 
 
 RAW = config.read_raw(REPO / "params.yaml")

@@ -25,7 +25,8 @@ def test_seconds_per_1k_points_weigh_jobs_by_their_clouds(tmp_path):
     for step, pair in seconds.items():
         for cloud, s in zip(("a", "b"), pair, strict=True):
             _bench(tmp_path / step / f"{cloud}.benchmark.tsv", s)
-    jobs = job_rows([("a", 1000, 1000), ("b", 3000, 1000)], str(tmp_path / "{step}" / "{cloud}.benchmark.tsv"))
+    jobs = job_rows([("a", 1000, 1000, 1000), ("b", 3000, 1000, 1000)],
+                    str(tmp_path / "{step}" / "{cloud}.benchmark.tsv"))
     assert len(jobs) == 6 and set(jobs["rss_mb"]) == {100.0}
     table = time_table(jobs, per_cluster=1000, n_clusters=4)
     assert table[PER_1K].to_dict() == pytest.approx({"MFPS": 1.5, "feature cache": 2.0, "network": 4.0, TOTAL: 7.5})

@@ -136,6 +136,35 @@ def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
     assert not any(k.startswith("variants") for k in workflow.tracked_keys(raw, STEPS["training"]))
 
 
+def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
+    """The cpu profile's budget (2 epochs, 2,500 scored points) makes reference, full's settings under it, a trained
+    variant of its own: the Refine-Net row of every table of variants, scored like them on one subset, which the
+    main tables are not. With no budget written anywhere, reference is full and trains nothing."""
+    assert PIPELINE.owners["reference"] == {"features": "full", "clustering": "full", "training": "reference",
+                                            "inference": "reference"}
+    for name in ("table_ablation", "table_loss", "table_initial", "table_clusters", "table_seeds"):
+        table = workflow.TABLES[name]
+        assert workflow.refinenet("reference") in table.methods and workflow.REFINENET not in table.methods, name
+        assert PIPELINE.scored_subset(table.methods) == 2500, name
+        assert "Every row scored on the same seeded 2500 points" in PIPELINE.caption(table), name
+    assert PIPELINE.scored_subset(workflow.TABLES["table_synthetic"].methods) is None
+    for step in ("training_l1", "training_reference", "training_kc2"):
+        assert "profiles.cpu.variant_budget.training" in workflow.tracked_keys(PIPELINE.raw, STEPS[step]), step
+    assert "profiles.smoke.variant_budget.inference" in workflow.tracked_keys(PIPELINE.raw, STEPS["inference_l1"])
+    assert not any("variant_budget" in k for k in workflow.tracked_keys(PIPELINE.raw, STEPS["training"]))
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    for block in raw["profiles"].values():
+        block.pop("variant_budget", None)
+    unbudgeted = workflow.Pipeline(raw)
+    assert set(unbudgeted.owners["reference"].values()) == {"full"} and "training_reference" not in unbudgeted.steps
+    assert unbudgeted.normals_path(workflow.refinenet("reference"), "test/a") == unbudgeted.normals_path("refinenet",
+                                                                                                        "test/a")
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    raw["variants"]["l1"]["inference"] = {"points": 100}  # against reference's 2,500
+    with pytest.raises(ParamsError, match=r"table_loss: its Refine-Net variants refine subsets of different sizes"):
+        workflow.Pipeline(raw)
+
+
 def test_a_wide_pca_input_is_a_variant_of_the_features_on_mfps_normals():
     """pca_input adds a K = 100 PCA normal to MFPS's inputs: every per-variant step its own, full's MFPS normals
     read, one more normal per point (X = 10) for its networks."""

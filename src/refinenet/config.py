@@ -26,10 +26,12 @@ from refinenet.errors import ParamsError
 
 SCHEMA = Path(__file__).with_name("params.schema.yaml")
 #: Mappings whose keys are data (categories, list names), replaced whole by an override.
-OPEN_MAPPINGS = frozenset({"test_lists", "test"})
+OPEN_MAPPINGS = frozenset({"test_lists", "test", "variant_budget"})
 LOSSES = ("mse", "l1")
 #: The Refine-Net variant that params.yaml describes as written; every other variant overrides it.
 FULL = "full"
+#: Full under `variant_budget`: the Refine-Net row of the tables of variants, trained and scored as they are.
+REFERENCE = "reference"
 #: The blocks a variant may override: those the per-variant steps (features, clustering, training, inference) read.
 VARIANT_BLOCKS = ("seed", "features", "clustering", "network", "patches", "training", "inference")
 
@@ -383,10 +385,15 @@ class InferenceConfig:
     precision: str = "float32"
     """Of the point MLP and height-map convolutions (`model.reduced_precision`): float32, bfloat16, or auto
     (bfloat16 on a CPU with native bfloat16)."""
+    points: int | None = None
+    """The pipeline's test clouds: refine only a seeded subset of this many points of each, which the tables then
+    score (`data.clouds.scored_points`); None: every point. `variant_budget` sets it for the variants."""
 
     def __post_init__(self) -> None:
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision '{self.precision}' is not one of {PRECISIONS}")
+        if self.points is not None and self.points < 1:
+            raise ValueError(f"points must be at least 1 or None, got {self.points}")
 
 
 @dataclass(frozen=True)
@@ -536,27 +543,37 @@ def resolve_variants(raw: dict[str, Any], source: str = "params.yaml",
             validate(merged, source)
         except ParamsError as err:
             raise ParamsError(f"profiles.{name}.{err.key}", err.problem, source) from None
-    every = {FULL: resolved, **{name: _apply_variant(resolved, name, source) for name in resolved["variants"]}}
-    for params in every.values():  # a variant's settings are its whole params; the block has served
+    if REFERENCE in resolved["variants"]:
+        raise ParamsError(f"variants.{REFERENCE}", "is reserved: full under variant_budget", source)
+    for name, block in profiles.items():  # budgets the active profile masks
+        if name != profile and "variant_budget" in (block or {}):
+            _apply_overrides(resolved, block["variant_budget"], f"profiles.{name}.variant_budget", source)
+    if apply_profile and "variant_budget" in (profiles[profile] or {}):
+        _apply_overrides(resolved, raw["variant_budget"], "variant_budget", source)
+    reference = _apply_overrides(resolved, resolved["variant_budget"], "variant_budget", source)
+    every = {FULL: resolved, REFERENCE: reference,
+             **{name: _apply_overrides(reference, resolved["variants"][name], f"variants.{name}", source)
+                for name in resolved["variants"]}}
+    for params in every.values():  # a variant's settings are its whole params; these blocks have served
         params.pop("variants")
+        params.pop("variant_budget")
     return every
 
 
-def _apply_variant(resolved: dict[str, Any], name: str, source: str) -> dict[str, Any]:
-    """`resolved` with the overrides of variant `name`, checked: only the per-variant blocks, valid values."""
-    overrides = resolved["variants"][name]
+def _apply_overrides(resolved: dict[str, Any], overrides: dict[str, Any], where: str, source: str) -> dict[str, Any]:
+    """`resolved` with the overrides written at `where` (a variant's, or the budget), checked: only the per-variant
+    blocks, valid values."""
     for key in overrides:
         if key not in VARIANT_BLOCKS:
-            raise ParamsError(f"variants.{name}.{key}", f"a variant may override only {', '.join(VARIANT_BLOCKS)}",
-                              source)
+            raise ParamsError(f"{where}.{key}", f"a variant may override only {', '.join(VARIANT_BLOCKS)}", source)
     try:
-        merged = deep_merge(resolved, overrides, f"variants.{name}.")
+        merged = deep_merge(resolved, overrides, f"{where}.")
     except ParamsError as err:
         raise ParamsError(err.key, err.problem, source) from None
     try:
         validate(merged, source)
     except ParamsError as err:
-        raise ParamsError(f"variants.{name}.{err.key}", err.problem, source) from None
+        raise ParamsError(f"{where}.{err.key}", err.problem, source) from None
     return merged
 
 

@@ -217,11 +217,22 @@ def read_scan(path: str | Path, max_points: int | None, seed: int, min_points: i
     return points
 
 
-def scored_points(meta: dict[str, Any]) -> np.ndarray | None:
-    """The points of a cloud record that the tables score: a test cloud's `.pidx` subset (PCPNet's evaluation
-    points), else None for all. Only these need features and a network pass, so a PCPNet shape of 100k points
-    costs the network 5,000."""
-    return np.asarray(meta["pidx"], dtype=np.int64) if meta.get("split") == "test" and "pidx" in meta else None
+def scored_points(cloud: Cloud, points: int | None = None) -> np.ndarray | None:
+    """The points of a cloud record that the tables score, or None for all: a test cloud's `.pidx` subset (PCPNet's
+    evaluation points), and of those (of all, without one) a seeded subset of `points` (`inference.points`, which
+    `variant_budget` sets for the variants). Only these need a network pass, so a PCPNet shape of 100k points costs
+    the network 5,000. The subset depends on the cloud's name alone, not on the seed a variant runs with, so every
+    row of a table scores the same points; a smaller subset is a prefix of a larger one."""
+    meta = cloud.meta
+    if meta.get("split") != "test":
+        return None
+    pool = np.asarray(meta["pidx"], dtype=np.int64) if "pidx" in meta else None
+    size = len(cloud) if pool is None else len(pool)
+    if points is None or points >= size:
+        return pool
+    order = np.random.default_rng(derive_seed(0, "scored", meta["category"], meta["name"])).permutation(size)
+    chosen = np.sort(order[:points])
+    return chosen if pool is None else pool[chosen]
 
 
 def _read_pidx(path: Path, n_points: int) -> list[int]:

@@ -30,17 +30,18 @@ METRIC_NAMES = {"mean": "mean", "rmse": "rmse", "pgp5": "PGP5", "pgp10": "PGP10"
 HIGHER_IS_BETTER = {"pgp5", "pgp10"}
 
 
-def evaluate(methods: Sequence[str], clouds: Sequence[str | Path], normals: dict[str, Sequence[str | Path]]
-             ) -> pd.DataFrame:
+def evaluate(methods: Sequence[str], clouds: Sequence[str | Path], normals: dict[str, Sequence[str | Path]],
+             points: int | None = None) -> pd.DataFrame:
     """Error statistics of every (method, cloud) on the cloud's scored points (`scored_points`: the `.pidx`
-    subset where there is one): `normals[method][i]` holds the estimate for `clouds[i]`."""
+    subset where there is one, and a seeded subset of `points` of them where given): `normals[method][i]` holds the
+    estimate for `clouds[i]`."""
     for method in methods:
         if len(normals[method]) != len(clouds):
             raise InputError(method, f"{len(normals[method])} normals files for {len(clouds)} clouds")
     rows = []
     for i, cloud_path in enumerate(clouds):
         cloud = read_cloud(cloud_path)
-        subset = scored_points(cloud.meta)
+        subset = scored_points(cloud, points)
         truth = cloud.normals if subset is None else cloud.normals[subset]
         for method in methods:
             estimated = read_normals(normals[method][i], len(cloud), subset)

@@ -81,11 +81,11 @@ def write_time_table(jobs: pd.DataFrame, table: pd.DataFrame, caption: str, labe
     write_text(paths["tex"], "\n".join(lines))
 
 
-def job_rows(clouds: Sequence[tuple[str, int, int]], pattern: str) -> pd.DataFrame:
-    """Every timed job of the given (cloud key, points, scored points) triples, from the benchmark files `pattern`
-    names (`{step}` and `{cloud}` open: `JOB_BENCHMARK`). MFPS runs on every point; the feature cache and the
-    network only on the scored ones (`data.clouds.scored_points`)."""
-    rows = [{"cloud": key, "step": name, "points": points if step == TIMED["MFPS"] else scored,
-             **read_benchmark(pattern.format(step=step, cloud=key))}
-            for key, points, scored in clouds for name, step in TIMED.items()]
+def job_rows(clouds: Sequence[tuple[str, int, int, int]], pattern: str) -> pd.DataFrame:
+    """Every timed job of the given (cloud key, points, featured points, refined points) tuples, from the benchmark
+    files `pattern` names (`{step}` and `{cloud}` open: `JOB_BENCHMARK`). MFPS runs on every point, the feature
+    cache on a PCPNet shape's `.pidx` points, the network on `inference.points` of those
+    (`data.clouds.scored_points`)."""
+    rows = [{"cloud": key, "step": name, "points": points, **read_benchmark(pattern.format(step=step, cloud=key))}
+            for key, *sizes in clouds for (name, step), points in zip(TIMED.items(), sizes, strict=True)]
     return pd.DataFrame(rows)

@@ -32,6 +32,7 @@ from refinenet.evaluation.table import METHOD_NAMES
 DVC_FILE = Path("dvc.yaml")
 REFINENET = "refinenet"
 FULL = config.FULL
+REFERENCE = config.REFERENCE
 
 #: File layout, as Snakemake patterns: `{cloud}` is a cloud's key `<split>/<category>/<name>`, `{variant}` a
 #: Refine-Net variant (params.yaml `variants`; `full` is the default Refine-Net).
@@ -150,7 +151,7 @@ _SYNTHETIC = (*BASELINES, *MFPS_METHODS, REFINENET)
 #: Rows of the ablation table ([P] table:ablation_results), after MFPS and simple MFPS.
 ABLATION = (("normals", "normals"), ("normals_hmps", "normals&HMPs"), ("normals_points", "normals&points"),
             ("concat", "concat"), ("residual", "residual"), ("rot", "Refine-Net-Rot"), ("trans", "Refine-Net-Trans"),
-            (FULL, "Refine-Net-Weight"))
+            (REFERENCE, "Refine-Net-Weight"))
 TABLES = {
     "table_baselines": Table(BASELINES, ("mean", "rmse"), "Baselines: unoriented angular error (degrees)"),
     "table_synthetic": Table(_SYNTHETIC, ("mean", "rmse"), "Synthetic benchmark: unoriented angular error (degrees)"),
@@ -159,25 +160,25 @@ TABLES = {
     "table_ablation": Table((*MFPS_METHODS, *(refinenet(v) for v, _ in ABLATION)), ("mean", "rmse"),
                             "Ablation study: unoriented angular error (degrees)",
                             labels=tuple((refinenet(v), label) for v, label in ABLATION)),
-    "table_loss": Table((refinenet("l1"), refinenet(FULL)), ("mean", "rmse"),
+    "table_loss": Table((refinenet("l1"), refinenet(REFERENCE)), ("mean", "rmse"),
                         "Training loss, L1 against L2: unoriented angular error (degrees)",
-                        labels=((refinenet("l1"), "L1"), (refinenet(FULL), "L2"))),
-    "table_initial": Table(("pca", refinenet("pca_init"), "jet", refinenet("jet_init"), "mfps", refinenet(FULL),
+                        labels=((refinenet("l1"), "L1"), (refinenet(REFERENCE), "L2"))),
+    "table_initial": Table(("pca", refinenet("pca_init"), "jet", refinenet("jet_init"), "mfps", refinenet(REFERENCE),
                             refinenet("pca_input")),
                            ("mean", "rmse", "pgp10"),
                            "Refine-Net on other initial normals: unoriented angular error (degrees) and PGP10",
                            labels=((refinenet("pca_init"), "PCA + Refine-Net"),
                                    (refinenet("jet_init"), "Jet + Refine-Net"),
-                                   (refinenet(FULL), "MFPS + Refine-Net"),
+                                   (refinenet(REFERENCE), "MFPS + Refine-Net"),
                                    (refinenet("pca_input"), "MFPS + Refine-Net (PCA K = 100 input)"))),
     "table_pcpnet": Table((*BASELINES, *MFPS_METHODS[:1], REFINENET), ("rmse",),
                           "PCPNet benchmark: RMSE (degrees) on each shape's scored points (its .pidx subset), "
                           "averaged over the shapes of a column",
                           protocol="pcpnet"),
-    "table_clusters": Table(tuple(refinenet(v) for v in (FULL, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
+    "table_clusters": Table(tuple(refinenet(v) for v in (REFERENCE, "kc1", "kc2", "kc3", "kc5", "kc6", "kc8")),
                             ("mean", "rmse"), "Number of clusters Kc: unoriented angular error (degrees)",
                             sweep=("clustering.n_clusters", "Kc")),
-    "table_seeds": Table(tuple(refinenet(v) for v in (FULL, "seed2023", "seed2024")), ("mean", "rmse"),
+    "table_seeds": Table(tuple(refinenet(v) for v in (REFERENCE, "seed2023", "seed2024")), ("mean", "rmse"),
                          "Refine-Net under three seeds of its clustering, training and inference: unoriented angular "
                          "error (degrees)", sweep=("seed", "seed")),
 }
@@ -202,7 +203,7 @@ FIGURE_CATEGORIES = ("SharpFeature", "RichFeature")
 FIGURE_CLUSTERS = {"png": "reports/figures/clusters.png", "pdf": "reports/figures/clusters.pdf"}
 CLUSTER_FIGURE_VARIANTS = ("kc2", FULL)
 #: [P] fig:loss2: one shape at increasing noise, each point blue where L1 (variant l1) gives the lower error and red
-#: where L2 (full, mse) does.
+#: where L2 (reference, mse) does.
 FIGURE_LOSS = {"png": "reports/figures/l1_against_l2.png", "pdf": "reports/figures/l1_against_l2.pdf"}
 #: Training loss and validation error per epoch of every cluster, one figure per trained variant.
 FIGURE_TRAINING_DIR = "reports/figures/training"
@@ -336,16 +337,20 @@ def _overlaps(a: str, b: str) -> bool:
 
 
 def override_keys(raw: dict[str, Any], variant: str) -> set[str]:
-    """The dotted keys a variant overrides, in params.yaml's `variants` and in any profile's."""
-    blocks = [(raw.get("variants") or {}).get(variant)]
-    blocks += [((p or {}).get("variants") or {}).get(variant) for p in (raw.get("profiles") or {}).values()]
+    """The dotted keys a variant overrides, in params.yaml's `variants` and `variant_budget` (which every variant
+    but full takes) and in any profile's."""
+    if variant == FULL:
+        return set()
+    sources = [raw, *((raw.get("profiles") or {}).values())]
+    blocks = [((s or {}).get("variants") or {}).get(variant) for s in sources]
+    blocks += [(s or {}).get("variant_budget") for s in sources]
     return {leaf for block in blocks if block for leaf in _leaves(block)}
 
 
 def owners(raw: dict[str, Any], variant: str) -> dict[str, str]:
     """For each per-variant step, the variant whose files `variant` uses: itself or full. Decided by the keys
     written, not their values, so that the pipeline (and dvc.yaml) is the same whichever profile is active."""
-    overridden = override_keys(raw, variant) if variant != FULL else set()
+    overridden = override_keys(raw, variant)
     own: dict[str, str] = {}
     for family, (keys, upstream) in VARIANT_STEPS.items():
         reached = any(_overlaps(k, o) for k in keys for o in overridden)
@@ -376,8 +381,20 @@ class Pipeline:
         self.scored = {v for t in TABLES.values() for v in t.variants} | set(self.full.figures.variants)
         """The variants whose normals of the test clouds a table or the normals figure shows: only these have
         test-cloud features and inference (x8 serves the real-scan figure alone)."""
+        for name, methods in [*((n, t.methods) for n, t in TABLES.items()), ("fig_normals", self.figure_methods())]:
+            self.scored_subset(methods, f"{name}: ")
         self.owners = {v: owners(raw, v) for v in self.params}
         self.steps: dict[str, Step] = {s.name: s for s in self._steps()}
+
+    def scored_subset(self, methods: tuple[str, ...], where: str = "") -> int | None:
+        """How many points of each test cloud the rows of a table (or the panels of a figure) are scored on: the
+        `inference.points` of its Refine-Net variants (None: all). Every row scores the same points, so the variants
+        that refine a subset must agree on its size; the others refined every point, any subset included."""
+        sizes = {self.params[v].inference.points for v in map(variant_of, methods) if v is not None} - {None}
+        if len(sizes) > 1:
+            raise ParamsError("inference.points", f"{where}its Refine-Net variants refine subsets of different sizes "
+                              f"{sorted(sizes)}; a table scores one subset")
+        return next(iter(sizes), None)
 
     @functools.cached_property
     def clouds(self) -> list[CloudSpec]:
@@ -507,17 +524,26 @@ class Pipeline:
             parts.append(f"MFPS K = {{{', '.join(map(str, m.scales))}}}, R = {m.trials}, "
                          f"theta_t = {m.theta_t} deg, |A| <= {m.a_max}, eta = {m.eta}.")
         if table.variants:
-            f, n, t, pa = params.features, params.network, params.training, params.patches
+            reference = self.params[REFERENCE if REFERENCE in table.variants else FULL]
+            f, n, t, pa = reference.features, reference.network, reference.training, reference.patches
             parts.append(
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
-                f"Kc = {params.clustering.n_clusters}, X = {f.n_normals}"
+                f"Kc = {reference.clustering.n_clusters}, X = {f.n_normals}"
                 f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
                 + (f", at most {t.max_train_points_per_cloud} training points per cloud"
                    if t.max_train_points_per_cloud else "") + ".")
-        changed = [f"{v}: " + ", ".join(f"{k} = {value}" for k, value in self.changes(v).items())
-                   for v in table.variants if v != FULL]
+        budget = self.changes(REFERENCE)
+        if REFERENCE in table.variants and budget:
+            main = asdict(self.full)
+            parts.append("Every variant, and Refine-Net as the reference row, under the variant budget: "
+                         + _settings(budget) + " (the main tables' Refine-Net: "
+                         + _settings({k: config.get(main, k) for k in budget}) + ").")
+        points = self.scored_subset(table.methods)
+        if points is not None:
+            parts.append(f"Every row scored on the same seeded {points} points of each test cloud.")
+        changed = [f"{v}: " + _settings(self.changes(v)) for v in table.variants if v not in (FULL, REFERENCE)]
         if changed:
             parts.append("Variants of Refine-Net (what each changes): " + "; ".join(changed) + ".")
         return " ".join(parts)
@@ -526,13 +552,15 @@ class Pipeline:
         return table.protocol or self.full.evaluation.protocol
 
     def changes(self, variant: str) -> dict[str, Any]:
-        """The settings in which a variant differs from full, by dotted key."""
+        """The settings in which a variant differs from reference (full under the variant budget, which every
+        variant takes), by dotted key; reference's: those in which it differs from full (the budget)."""
         def flat(tree: Any, prefix: str = "") -> dict[str, Any]:
             if isinstance(tree, dict):
                 return {k: v for key, value in tree.items() for k, v in flat(value, f"{prefix}{key}.").items()}
             return {prefix.rstrip("."): tree}
-        full, other = flat(asdict(self.full)), flat(asdict(self.params[variant]))
-        return {k: other[k] for k in other if other[k] != full.get(k)}
+        base = self.full if variant == REFERENCE else self.params[REFERENCE]
+        own, other = flat(asdict(base)), flat(asdict(self.params[variant]))
+        return {k: other[k] for k in other if other[k] != own.get(k)}
 
     def _files(self, family: str, variant: str, split: str) -> str:
         """The folder of a per-variant step's files of one split (or the cluster model's, the networks')."""
@@ -593,6 +621,8 @@ class Pipeline:
     def _table_step(self, name: str, table: Table) -> Step:
         blocks = _blocks(table.methods)
         variants = tuple(f"variants.{v}" for v in table.variants if v != FULL and _exists(self.raw, f"variants.{v}"))
+        variants += ("inference.points",) if table.variants else ()
+        variants += ("variant_budget",) if set(table.variants) - {FULL} else ()
         files = Table.files(name, table)
         normals = dict.fromkeys(map(self.normals_dir, table.methods))
         return Step(
@@ -699,6 +729,7 @@ class Pipeline:
             Step(
                 name="fig_normals", family="fig", modules=_FIG,
                 keys=("data.source", "data.path", "data.n_points", "figures.variants", *_blocks(self.figure_methods()),
+                      "inference.points", "variant_budget",
                       *(f"variants.{v}" for v in self.full.figures.variants if _exists(self.raw, f"variants.{v}"))),
                 deps=("results/clouds/test", *dict.fromkeys(map(self.normals_dir, self.figure_methods()))),
                 outs=tuple(FIGURE_NORMALS.values()), targets=lambda: list(FIGURE_NORMALS.values()),
@@ -729,7 +760,7 @@ class Pipeline:
             Step(
                 name="report", family="report", modules=("evaluation.report", *_TABLE, *_STAGE),
                 keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
-                      "training", "inference", "evaluation", "denoise", "figures", "variants"),
+                      "training", "inference", "evaluation", "denoise", "figures", "variants", "variant_budget"),
                 deps=tuple(dict.fromkeys(FIGURE_TRAINING_DIR if p.startswith(f"{FIGURE_TRAINING_DIR}/") else p
                                          for p in self.reported_files())),
                 outs=tuple(REPORT_FILES.values()),
@@ -752,6 +783,11 @@ def figure_name(method: str) -> str:
     """A method's name in figures: its table name, or `Refine-Net <variant>` for a variant."""
     variant = variant_of(method)
     return METHOD_NAMES[method] if variant in (None, FULL) else f"{METHOD_NAMES[REFINENET]} {variant}"
+
+
+def _settings(values: dict[str, Any]) -> str:
+    """Dotted keys and their values as a caption lists them, None as params.yaml writes it."""
+    return ", ".join(f"{k} = {'null' if v is None else v}" for k, v in values.items())
 
 
 def _figure(files: dict[str, str]) -> dict[str, Any]:
@@ -784,9 +820,10 @@ def _exists(tree: Any, dotted: str) -> bool:
 
 
 def tracked_keys(raw: dict[str, Any], step: Step) -> list[str]:
-    """The params keys a step depends on: `profile`, its own keys, its variant's overrides of them, and every
-    profile's overrides of all these."""
-    overrides = [f"variants.{step.variant}.{k}" for k in step.keys] if step.variant != FULL else []
+    """The params keys a step depends on: `profile`, its own keys, its variant's overrides of them (its own and the
+    variant budget's), and every profile's overrides of all these."""
+    overrides = ([f"{where}.{k}" for where in (f"variants.{step.variant}", "variant_budget") for k in step.keys]
+                 if step.variant != FULL else [])
     keys = ["profile", *step.keys, *(k for k in overrides if _exists(raw, k))]
     for name, block in (raw.get("profiles") or {}).items():
         keys += [f"profiles.{name}.{k}" for k in (*step.keys, *overrides) if _exists(block, k)]
