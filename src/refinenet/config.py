@@ -545,11 +545,11 @@ def resolve_variants(raw: dict[str, Any], source: str = "params.yaml",
             raise ParamsError(f"profiles.{name}.{err.key}", err.problem, source) from None
     if REFERENCE in resolved["variants"]:
         raise ParamsError(f"variants.{REFERENCE}", "is reserved: full under variant_budget", source)
-    for name, block in profiles.items():  # budgets the active profile masks
-        if name != profile and "variant_budget" in (block or {}):
-            _apply_overrides(resolved, block["variant_budget"], f"profiles.{name}.variant_budget", source)
-    if apply_profile and "variant_budget" in (profiles[profile] or {}):
-        _apply_overrides(resolved, raw["variant_budget"], "variant_budget", source)
+    written = [("variant_budget", raw["variant_budget"]),
+               *((f"profiles.{name}.variant_budget", block["variant_budget"]) for name, block in profiles.items()
+                 if "variant_budget" in (block or {}))]
+    for where, budget in written:  # every budget as written, masked or not, reported under its own key
+        _apply_overrides(resolved, budget, where, source)
     reference = _apply_overrides(resolved, resolved["variant_budget"], "variant_budget", source)
     every = {FULL: resolved, REFERENCE: reference,
              **{name: _apply_overrides(reference, resolved["variants"][name], f"variants.{name}", source)
