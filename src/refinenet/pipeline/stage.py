@@ -1,4 +1,5 @@
-"""What every stage script shares: the params file, CPU thread limits, and one-line errors with exit status 2.
+"""What every stage script shares: the params file, CPU thread limits, malloc thresholds that keep freed memory,
+and one-line errors with exit status 2.
 
 A stage script takes the params file, the files it reads and writes, and the identity of its job (a method, a
 cluster, a Refine-Net variant), and nothing else: every setting comes from the typed `Params`, so no default lives
@@ -12,6 +13,7 @@ import sys
 from collections.abc import Callable
 
 from refinenet import config
+from refinenet.allocator import keep_freed_memory
 from refinenet.config import Params
 from refinenet.errors import RefineNetError
 
@@ -36,6 +38,7 @@ def run(doc: str, arguments: Callable[[argparse.ArgumentParser], None],
     arguments(parser)
     args = parser.parse_args()
     limit_threads(args.threads)
+    keep_freed_memory()
     try:
         main(config.load(args.params, variant=args.variant), args)
     except RefineNetError as err:
