@@ -1,5 +1,6 @@
 """Native thread limits (BLAS, OpenMP, numba): they read their thread count once, when first imported, so it must
-be set in the environment before anything imports numpy. This module imports nothing that does."""
+be set in the environment before anything imports numpy. This module imports nothing that does. Calls that take a
+thread count of their own (scipy's k-d tree `workers`) ask `native_threads`."""
 
 import os
 
@@ -10,3 +11,13 @@ def limit_native_threads(threads: int | str) -> None:
     """Let the native libraries loaded after this call use at most `threads` threads."""
     for variable in VARIABLES:
         os.environ[variable] = str(threads)
+
+
+def native_threads() -> int:
+    """The threads native code may use: the limit `limit_native_threads` set, else every core this process may use.
+    scipy's `workers=-1` would take every core of the machine whatever a job was given, and start that many threads
+    on every call, however small (a training batch makes dozens of one-point queries)."""
+    limit = os.environ.get(VARIABLES[0], "")
+    if limit.isdigit() and int(limit) > 0:
+        return int(limit)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1

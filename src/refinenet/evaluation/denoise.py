@@ -29,6 +29,7 @@ from scipy.spatial import cKDTree
 
 from refinenet.atomic import atomic_path
 from refinenet.errors import InputError
+from refinenet.threads import native_threads
 
 #: Poisson vertices whose density (Open3D's estimated octree depth of the vertex) lies more than this many octree
 #: levels below the median are trimmed. Measured (depth 8, 20k points): a closed sphere loses none; a hemisphere
@@ -98,7 +99,7 @@ def surface_distance(points: np.ndarray, surface_points: np.ndarray, surface_nor
     points = _cloud(points, "points")
     surface_points = _cloud(surface_points, "surface_points")
     surface_normals = _normals(surface_normals, surface_points, "surface_normals")
-    nearest = cKDTree(surface_points).query(points, workers=-1)[1]
+    nearest = cKDTree(surface_points).query(points, workers=native_threads())[1]
     return np.abs(np.einsum("ij,ij->i", points - surface_points[nearest], surface_normals[nearest]))
 
 

@@ -22,6 +22,7 @@ import scipy.sparse as sp
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.frames import target_sign
 from refinenet.geometry.neighbors import CHUNK_ELEMENTS, build_tree, chunks
+from refinenet.threads import native_threads
 
 #: Ball pairs per chunk, about 150 bytes of intermediates each (~40 MB). Run time hardly depends on it: 100k
 #: points took 3.5-3.7 s of CPU with 100k to 2M pairs per chunk.
@@ -54,7 +55,7 @@ def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
     range_coef = np.asarray([1.0 / s ** 2 for s in sigma_r], dtype=np.float32)  # 2(1 - |cos|) / (2 sigma_r^2)
 
     tree = build_tree(points)
-    ball_sizes = tree.query_ball_point(points, radius, return_length=True, workers=-1)
+    ball_sizes = tree.query_ball_point(points, radius, return_length=True, workers=native_threads())
     axes = [np.ascontiguousarray(n0[:, a]) for a in range(3)]  # 1-D gathers beat one N x 3 gather
     sums = np.empty((len(points), len(spatial_coef), len(range_coef), 3), dtype=np.float32)
     for sl in chunks(len(points), int(ball_sizes.max()), PAIRS_PER_CHUNK):

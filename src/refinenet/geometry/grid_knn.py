@@ -20,6 +20,8 @@ import numpy as np
 from numba import njit, prange
 from scipy.spatial import cKDTree
 
+from refinenet.threads import native_threads
+
 # Prefer OpenMP: the TBB layer warns about the libtbb that ships beside open3d and is skipped anyway.
 numba.config.THREADING_LAYER_PRIORITY = ["omp", "tbb", "workqueue"]
 
@@ -84,7 +86,7 @@ def build_grid(points: np.ndarray, k: int, tree: cKDTree) -> Grid | None:
     sample = points[np.random.default_rng(0).choice(n, min(n, SAMPLE), replace=False)]
     # the spread of the k-th distance is only a density measure for k well above 1 (the 1st is the point)
     probe = min(max(k, MIN_PROBE), n)
-    dist = tree.query(sample, k=probe, workers=-1)[0]
+    dist = tree.query(sample, k=probe, workers=native_threads())[0]
     low, radius = np.quantile(dist[:, -1], [1 - RADIUS_QUANTILE, RADIUS_QUANTILE])
     if not (low > 0 and radius <= MAX_DENSITY_SPREAD * low and np.all(np.isfinite(sample))):
         return None

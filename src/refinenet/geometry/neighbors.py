@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from refinenet.geometry.grid_knn import Grid, build_grid, grid_covariances, grid_knn
+from refinenet.threads import native_threads
 
 #: Neighbour entries (rows x k) gathered per chunk: small enough that the gathered arrays stay in cache
 #: (measured: 100k x 100 covariances take 0.1 s in chunks of 1M entries, 0.65 s in chunks of 8M).
@@ -70,7 +71,7 @@ def _tree_knn(tree: cKDTree, query: np.ndarray, k: int, rows: np.ndarray, dist: 
     the query time on a 1M-point cloud stored in random order.
     """
     for sl in chunks(len(rows), k):
-        d, i = tree.query(query[rows[sl]], k=k, workers=-1)
+        d, i = tree.query(query[rows[sl]], k=k, workers=native_threads())
         idx[rows[sl]] = i.reshape(-1, k)
         if dist is not None:
             dist[rows[sl]] = d.reshape(-1, k)
@@ -89,7 +90,7 @@ def knn_covariances(points: np.ndarray, k: int) -> np.ndarray:
     rest = np.flatnonzero(~done)
     for sl in chunks(len(rest), k):
         rows = rest[sl]
-        covs[rows] = covariances(points, tree.query(points[rows], k=k, workers=-1)[1].reshape(-1, k))[1]
+        covs[rows] = covariances(points, tree.query(points[rows], k=k, workers=native_threads())[1].reshape(-1, k))[1]
     return covs
 
 

@@ -15,6 +15,7 @@ from scipy.spatial import cKDTree
 
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.neighbors import build_tree
+from refinenet.threads import native_threads
 
 #: The spacing of a cloud is the median distance from a point to its SPACING_K-th nearest neighbour (self
 #: excluded): the nearest neighbour alone is dominated by noise, 16 neighbours sample the surface density.
@@ -31,7 +32,7 @@ def neighbour_distance(points: np.ndarray, k: int, quantile: float = 0.5, tree: 
     points = np.asarray(points, dtype=np.float64)
     tree = tree if tree is not None else build_tree(points)
     sample = points[sample_rows(len(points), seed)]
-    return float(np.quantile(tree.query(sample, min(k + 1, len(points)), workers=-1)[0][:, -1], quantile))
+    return float(np.quantile(tree.query(sample, min(k + 1, len(points)), workers=native_threads())[0][:, -1], quantile))
 
 
 def sample_rows(n_points: int, seed: int = 0) -> np.ndarray | slice:
