@@ -1,5 +1,7 @@
 """Readers and writers: round trips, and one clear error per kind of bad file."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -140,3 +142,17 @@ def test_failed_write_leaves_nothing(tmp_path):
         tmp.write_text("partial")
         raise Boom
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_written_files_get_the_mode_the_umask_gives(tmp_path, umask, mode):
+    """An atomic write must not leave the owner-only mode of its temporary file: a report shared with a group
+    (reports/index.html) would be unreadable to it."""
+    from refinenet.atomic import write_text
+
+    previous = os.umask(umask)
+    try:
+        write_text(tmp_path / "index.html", "<html></html>")
+    finally:
+        os.umask(previous)
+    assert (tmp_path / "index.html").stat().st_mode & 0o777 == mode
