@@ -43,6 +43,21 @@ def rule_summary(run_dir: Path) -> pd.DataFrame:
         peak_rss_mb=("rss_mb", "max"))
 
 
+def duration(seconds: float) -> str:
+    """Minutes for a short run, hours (and minutes) for a long one, as the issue's budgets are given."""
+    if seconds < 7200:
+        return f"{seconds / 60:.1f} minutes"
+    return f"{seconds / 3600:.2f} hours ({seconds / 60:.0f} minutes)"
+
+
+def family_totals(summary: pd.DataFrame) -> str:
+    """Job seconds summed per step family (a variant's training counts as training), largest first."""
+    family = summary.index.map(lambda rule: next((s for s in VARIANT_STEPS if rule.startswith(s)), "other steps"))
+    totals = summary.job_seconds.groupby(family).sum().sort_values(ascending=False)
+    parts = ", ".join(f"{name} {seconds:,.0f}" for name, seconds in totals.items())
+    return f"Job seconds in all: {summary.job_seconds.sum():,.0f} ({parts})."
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run_dir", type=Path)
@@ -56,10 +71,12 @@ def main() -> None:
     lines = [
         f"# Pipeline run, profile `{args.profile}`",
         "",
-        f"`{args.command}` on a fresh clone: **{args.wall_seconds / 60:.1f} minutes** wall time in total "
+        f"`{args.command}` on a fresh clone: **{duration(args.wall_seconds)}** wall time in total "
         f"(environment set-up included), on {os.cpu_count()} cores, {platform.machine()}, Python "
         f"{platform.python_version()}. Job seconds are summed over jobs that ran two at a time." +
         (f" {args.note}" if args.note else ""),
+        "",
+        family_totals(summary),
         "",
         "| rule | jobs | job seconds (sum) | longest job (s) | peak memory of a job (MB) |",
         "|---|---|---|---|---|",
