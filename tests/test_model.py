@@ -63,7 +63,7 @@ def test_presets():
 
 
 @pytest.mark.parametrize("bad", [
-    {"features": "points"}, {"connection": "add"}, {"features": "normals", "connection": "rot"},
+    {"features": "points"}, {"connection": "add"}, {"output": "residual"}, {"features": "normals", "connection": "rot"},
     {"n_normals": 0}, {"point_fc": ()}, {"output_fc": (256, 0)}, {"dropout": 1.0}, {"dropout": -0.1},
     {"hmp_size": 4}, {"n_patch_points": 0}, {"hmp_architecture": "left"},
 ])
@@ -196,6 +196,27 @@ def test_rotation_connection_starts_at_identity_and_stays_a_rotation():
     torch.testing.assert_close(torch.linalg.det(r), torch.ones(6))
     half_turn_about_z = quaternion_to_matrix(torch.tensor([[0.0, 0.0, 0.0, 2.0]]))
     torch.testing.assert_close(half_turn_about_z[0], torch.diag(torch.tensor([-1.0, -1.0, 1.0])))
+
+
+@pytest.mark.parametrize("features", ["full", "normals"])
+def test_correction_output_starts_at_the_initial_normal_and_learns(features: str):
+    torch.manual_seed(0)
+    model = RefineNet(preset("release", features=features, output="correction"))
+    assert count_parameters(model) == count_parameters(RefineNet(preset("release", features=features)))
+    normals, points, heights = _inputs(model.config)
+    torch.testing.assert_close(model(normals, points, heights), normals[:, :3])
+    torch.testing.assert_close(model.eval()(normals, points, heights), normals[:, :3])
+    model.train()
+    target = torch.tensor([[0.0, 0.0, 1.0]]).expand(4, 3)
+    optimiser = torch.optim.Adam(model.parameters(), lr=1e-2)
+    errors = []
+    for _ in range(20):
+        optimiser.zero_grad()
+        loss = (model(normals, points, heights) - target).pow(2).sum(dim=1).mean()
+        loss.backward()
+        optimiser.step()
+        errors.append(loss.item())
+    assert errors[-1] < 0.1 * errors[0]
 
 
 def test_missing_or_misshapen_inputs_are_named():

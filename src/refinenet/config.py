@@ -258,6 +258,9 @@ class NetworkParams:
     """Feature modules: full, normals, normals_points, normals_hmps."""
     connection: str
     """How a feature module refines a normal: weight, rot, trans, concat, residual."""
+    output: str
+    """normal ([P]: the network regresses the normal) or correction (beyond the paper: it regresses a change
+    of the initial normal, starting from no change)."""
 
 
 PATCH_MODES = ("knn", "ball")

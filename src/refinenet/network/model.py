@@ -26,6 +26,8 @@ from refinenet.errors import ParamsError
 
 FEATURES = ("full", "normals", "normals_points", "normals_hmps")
 CONNECTIONS = ("weight", "rot", "trans", "concat", "residual")
+#: What the output module gives: the normal itself ([P], [C]) or a correction to the first input normal.
+OUTPUTS = ("normal", "correction")
 
 #: Per-point shared MLP of the point module (PointNet without T-Net).
 POINT_MLP = (64, 64, 64, 128, 1024)
@@ -64,6 +66,10 @@ class NetworkConfig:
     """Points per patch: 100 in [C] (kNN), 300 in [P] (ball, padded). The network accepts any count."""
     hmp_architecture: str | None = None
     """Column of [P] Table network_architecture: refinenet or ablation; None: §8's choice for `features`."""
+    output: str = "normal"
+    """normal: the output module regresses the normal ([P], [C]). correction (beyond the paper): it regresses a
+    vector added to the first input normal (the initial normal when X = 9) before normalisation, and starts at
+    zero, so that an untrained network returns its input and training only has to learn the change."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point_fc", tuple(self.point_fc))
@@ -74,6 +80,8 @@ class NetworkConfig:
             raise ValueError(f"features '{self.features}' is not one of {FEATURES}")
         if self.connection not in CONNECTIONS:
             raise ValueError(f"connection '{self.connection}' is not one of {CONNECTIONS}")
+        if self.output not in OUTPUTS:
+            raise ValueError(f"output '{self.output}' is not one of {OUTPUTS}")
         if self.features == "normals" and self.connection != "weight":
             raise ValueError(f"connection '{self.connection}' needs a feature module, and 'normals' has none")
         for name in ("point_fc", "output_fc"):
@@ -129,7 +137,8 @@ def architecture(network: NetworkParams, features: FeatureConfig, patches: Patch
     block and the patch size from the patches block; a combination that makes no network is a ParamsError."""
     try:
         return preset(network.preset, features=network.features, connection=network.connection,
-                      n_normals=features.n_normals, hmp_size=features.hmp_size, n_patch_points=patches.size)
+                      output=network.output, n_normals=features.n_normals, hmp_size=features.hmp_size,
+                      n_patch_points=patches.size)
     except ValueError as err:
         raise ParamsError("network", str(err)) from None
 
@@ -337,13 +346,18 @@ class ConnectionModule(nn.Module):
 
 class OutputModule(nn.Sequential):
     """Branches -> unit normal: BN on the input ([C]; kept in both presets, as the §8 parameter count of [P]'s
-    sizes includes it), FC with BN, ReLU, Dropout, a final Linear to 3, and L2 normalisation."""
+    sizes includes it), FC with BN, ReLU, Dropout, a final Linear to 3, and L2 normalisation. With a `base`
+    (output "correction") the final Linear starts at zero and its output is added to the base first."""
 
-    def __init__(self, in_dim: int, hidden: Sequence[int], dropout: float):
+    def __init__(self, in_dim: int, hidden: Sequence[int], dropout: float, correction: bool = False):
         super().__init__(nn.BatchNorm1d(in_dim), *_fc((in_dim, *hidden, 3), dropout))
+        if correction:
+            nn.init.zeros_(self[-1].weight)
+            nn.init.zeros_(self[-1].bias)
 
-    def forward(self, x: Tensor) -> Tensor:
-        return F.normalize(super().forward(x), dim=1)
+    def forward(self, x: Tensor, base: Tensor | None = None) -> Tensor:
+        y = super().forward(x)
+        return F.normalize(y if base is None else y + base.to(y.dtype), dim=1)
 
 
 class RefineNet(nn.Module):
@@ -373,16 +387,18 @@ class RefineNet(nn.Module):
         self.connections = nn.ModuleList(connections)
         if connections:
             self.output_module = OutputModule(config.n_normals * connections[0].out_dim, config.output_fc,
-                                              config.dropout)
+                                              config.dropout, config.output == "correction")
         else:
-            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout)
+            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout,
+                                              config.output == "correction")
 
     def forward(self, normals: Tensor, points: Tensor | None = None, heights: Tensor | None = None) -> Tensor:
         x = self.config.n_normals
         if normals.dim() != 2 or normals.shape[1] != 3 * x:
             raise ValueError(f"normals must have shape (B, {3 * x}), got {tuple(normals.shape)}")
+        base = normals[:, :3] if self.config.output == "correction" else None
         if not self.connections:
-            return self.output_module(normals)
+            return self.output_module(normals, base)
         features = []
         if self.point_module is not None:
             if points is None or points.dim() != 3 or points.shape[2] != 3:
@@ -395,7 +411,7 @@ class RefineNet(nn.Module):
             features.append(self.height_map_module(heights))
         v = normals.reshape(-1, x, 3)
         branches = [conn(v[:, b], features) for b, conn in enumerate(self.connections)]
-        return self.output_module(torch.cat(branches, dim=1))
+        return self.output_module(torch.cat(branches, dim=1), base)
 
 
 def fuse_batch_norm(model: RefineNet) -> RefineNet:
