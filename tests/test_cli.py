@@ -3,12 +3,15 @@ whole cloud, oriented output in every format, and one-line errors."""
 
 from __future__ import annotations
 
+import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from refinenet.cli.estimate import estimate_normals
 from refinenet.data.io import read_cloud, read_normals
@@ -17,7 +20,7 @@ from refinenet.data.shapes import sample_shape
 from refinenet.estimators.baselines import pca_normals
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.geometry.scale import point_spacing, spacing_unit
-from refinenet.network.release import SHIPPED, load_release
+from refinenet.network.release import SHIPPED, half, load_release
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -77,6 +80,28 @@ def test_release_card_describes_the_networks(release):
     assert abs(check["error_float16_deg"] - check["error_float32_deg"]) < 0.01
     assert 0 < release.spacing_ratio < 0.1
     assert (SHIPPED / "networks.pt").stat().st_size <= 25 * 2**20
+
+
+def test_float16_storage_keeps_the_tensors_it_cannot_hold():
+    """A BN running variance above float16's maximum (65,504) would load as inf and silence its channels."""
+    stored = half({"weight": torch.tensor([0.5, -2.0]), "running_var": torch.tensor([1.0e5, 3.0]),
+                   "num_batches_tracked": torch.tensor(7)})
+    assert stored["weight"].dtype == torch.float16
+    assert stored["running_var"].dtype == torch.float32
+    assert stored["num_batches_tracked"].dtype == torch.int64
+
+
+def test_a_release_from_before_the_output_setting_loads_as_regressing_the_normal(tmp_path):
+    """Releases exported before `network.output` existed stored no such key; they regress the normal."""
+    shutil.copytree(SHIPPED, tmp_path, dirs_exist_ok=True)
+    bundle = torch.load(tmp_path / "networks.pt", weights_only=True)
+    params, network = json.loads(bundle["params"]), json.loads(bundle["network"])
+    params["network"].pop("output", None), network.pop("output", None)
+    bundle["params"], bundle["network"] = json.dumps(params), json.dumps(network, sort_keys=True)
+    torch.save(bundle, tmp_path / "networks.pt")
+    old = load_release(tmp_path, with_networks=False)
+    assert old.params.network.output == "normal"
+    assert all(net.config.output == "normal" for net in load_release(tmp_path).networks.values())
 
 
 # ------------------------------------------------------------------------------------------------------ the unit

@@ -64,8 +64,10 @@ def training_spacing(clouds: Sequence[np.ndarray]) -> float:
 
 
 def half(state: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """A state dict with its floating tensors in float16 (integer buffers such as BN counters kept)."""
-    return {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
+    """A state dict with its floating tensors in float16, except those beyond float16's range (a BN's running
+    variance can exceed 65,504 and would become inf) and integer buffers such as BN counters, which are kept."""
+    return {k: v.half() if v.is_floating_point() and v.abs().max() <= torch.finfo(torch.float16).max else v
+            for k, v in state.items()}
 
 
 def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterModel,
@@ -91,6 +93,11 @@ def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterM
     write_text(folder / CARD_MD, model_card_markdown(card))
 
 
+#: Network settings added after releases were first exported, with the value that every older release implies,
+#: so that a user's exported networks keep loading.
+IMPLIED_NETWORK = {"output": "normal"}
+
+
 def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu", fuse: bool = True,
                  with_networks: bool = True, precision: str = "float32") -> Release:
     """The release in `folder` (default: the shipped one), networks in eval mode on `device` (none without
@@ -107,10 +114,12 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
         raise InputError(path, f"not a Refine-Net release ({str(err).splitlines()[0]})") from None
     if not isinstance(bundle, dict) or bundle.get("format") != FORMAT:
         raise InputError(path, f"not a Refine-Net release of format {FORMAT}")
-    params = Params.from_resolved(json.loads(bundle["params"]), str(path))
-    network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v
-                               for k, v in json.loads(bundle["network"]).items()})
-    if network_fingerprint(network) != bundle["network"]:
+    resolved = json.loads(bundle["params"])
+    resolved["network"] = IMPLIED_NETWORK | resolved["network"]
+    params = Params.from_resolved(resolved, str(path))
+    stored = IMPLIED_NETWORK | json.loads(bundle["network"])
+    network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()})
+    if network_fingerprint(network) != json.dumps(stored, sort_keys=True):
         raise InputError(path, "the network description does not round-trip")
     cluster_model = ClusterModel(**{k: v.numpy() for k, v in bundle["cluster_model"].items()})
     networks = {}
@@ -166,8 +175,8 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "## Networks",
         "",
         f"- Architecture: {card['network']['preset']} preset, features {card['network']['features']}, "
-        f"connection {card['network']['connection']}; X = {card['n_normals']} normals, Kc = {card['n_clusters']} "
-        "clusters, one network per cluster.",
+        f"connection {card['network']['connection']}, output {card['network'].get('output', 'normal')}; "
+        f"X = {card['n_normals']} normals, Kc = {card['n_clusters']} clusters, one network per cluster.",
         f"- Parameters: {card['parameters']['per_cluster']:,} per cluster network, "
         f"{card['parameters']['total']:,} in total; stored in float16, run in float32.",
         f"- Half precision: on {check['points']:,} test points, the float16 weights change the mean error from "
