@@ -55,6 +55,10 @@ EXPERIMENTS = {
                                 {"batch_size": 64, "lr_schedule": "cosine", "precision": "bfloat16"}),
     "batch64_cosine_points2000": ("batch 64, the cosine decay and 2000 points per cloud",
                                   {"batch_size": 64, "lr_schedule": "cosine", "max_train_points_per_cloud": 2000}),
+    "batch64_cosine_bfloat16_correction": (
+        "batch 64, the cosine decay, bfloat16, and the network regressing a correction of the initial normal "
+        "(network output `correction`)",
+        {"batch_size": 64, "lr_schedule": "cosine", "precision": "bfloat16", "output": "correction"}),
 }
 
 
@@ -83,10 +87,12 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
         key = str(cloud_path.relative_to(run / "results" / "clouds")).removesuffix(".npz")
         cloud, features = load_for_cloud(run / CLOUD.format(cloud=key), run / FEATURES.format(variant=FULL, cloud=key))
         clouds.append(prepare(cloud.points, features, model, cloud.normals))
-    network = architecture(params.network, params.features, params.patches)
     OUT.mkdir(parents=True, exist_ok=True)
     for name in names:
-        train = replace(params.training, **(CPU_RECIPE | EXPERIMENTS[name][1]), max_epochs=epochs, patience=epochs,
+        changes = CPU_RECIPE | EXPERIMENTS[name][1]
+        network = architecture(replace(params.network, output=changes.pop("output", "normal")), params.features,
+                               params.patches)
+        train = replace(params.training, **changes, max_epochs=epochs, patience=epochs,
                         seed=derive_seed(params.seed, "train", cluster), threads=1)
         data = cluster_data(clouds, cluster, train, params.patches)
         with tempfile.TemporaryDirectory() as tmp:
@@ -124,7 +130,8 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
     precisions = sorted({json.loads(path.read_text()).get("precision", "float32") for path in results})
     lines = ["", f"## The run's own training ({t.optimizer}, lr {t.lr}, {t.lr_schedule}, batch {t.batch_size}, "
              f"{t.max_epochs} epochs, at most {t.max_train_points_per_cloud} points per cloud, "
-             f"{' and '.join(precisions)})", "",
+             f"{' and '.join(precisions)}; network output {params.network.output}, "
+             f"X = {params.features.n_normals} input normals)", "",
              f"The run given (profile `{params.profile}`): the pipeline's training jobs, one thread each, two at a "
              "time. *Last change*: the last epoch's change of the validation mean.", "",
              "| cluster | train / val points | input val mean / RMSE | val mean per epoch | kept mean / RMSE "
@@ -144,6 +151,12 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
     return lines
 
 
+def _cluster_key(record: dict) -> tuple[int, int]:
+    """The cluster's number and its training points at the cpu recipe's cap per cloud."""
+    scale = CPU_RECIPE["max_train_points_per_cloud"] / record["training"]["max_train_points_per_cloud"]
+    return record["cluster"], round(record["result"]["train_points"] * scale)
+
+
 def report(params: config.Params, run_lines: list[str]) -> None:
     """training.md (one row per kept experiment, compared with the cpu recipe's 4 epochs on the same cluster) and
     training.png (validation mean error against CPU minutes, one panel per cluster)."""
@@ -154,7 +167,8 @@ def report(params: config.Params, run_lines: list[str]) -> None:
     order = list(EXPERIMENTS)
     runs.sort(key=lambda run: (run[0]["cluster"], order.index(run[0]["experiment"]), run[0]["training"]["max_epochs"]))
     # The cpu recipe's rate is constant, so the first 4 epochs of a longer cpu run are the 4-epoch run itself.
-    baseline = {record["cluster"]: history.iloc[:4] for record, history in runs
+    # A cluster is known by its number and size: another clustering's cluster of that number is another one.
+    baseline = {_cluster_key(record): history.iloc[:4] for record, history in runs
                 if record["experiment"] == "cpu" and len(history) >= 4}
     rows, curves = [], {}
     for record, history in runs:
@@ -173,7 +187,7 @@ def report(params: config.Params, run_lines: list[str]) -> None:
             "CPU min": f"{history['cpu_s'].iloc[-1] / 60:.1f}",
             "vs cpu recipe": "",
         }
-        reference = baseline.get(record["cluster"])
+        reference = baseline.get(_cluster_key(record))
         if reference is not None:
             reference_mean = reference["val_mean_deg"].iloc[int(reference["val_rmse_deg"].idxmin())]
             extra = (history["cpu_s"].iloc[-1] - reference["cpu_s"].iloc[-1]) / 60
