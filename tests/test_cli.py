@@ -55,7 +55,7 @@ def cli(*args: str | Path) -> subprocess.CompletedProcess:
 def test_shipped_networks_improve_on_mfps_on_a_held_out_shape(release):
     """A RichFeature shape never trained on, at a test noise level. (The shipped networks come from the short CPU
     training of the default profile: like the committed table, they gain most on RichFeature and still lose to
-    MFPS on SharpFeature and BigNoise shapes; the README says so.)"""
+    MFPS in mean error on SharpFeature shapes; the README says so.)"""
     points, truth = held_out("twistedstar_a")
     errors = {m: unoriented_angles(estimate_normals(points, release, m), truth).mean() for m in ("mfps", "refinenet")}
     assert errors["refinenet"] < 0.9 * errors["mfps"], errors

@@ -528,7 +528,9 @@ class Pipeline:
             f, n, t, pa = reference.features, reference.network, reference.training, reference.patches
             parts.append(
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
+                + ("output a correction of the initial normal, " if n.output == "correction" else "") +
                 f"Kc = {reference.clustering.n_clusters}, X = {f.n_normals}"
+                + (f" (the last a PCA K = {f.pca_k} normal)" if f.pca_k else "") +
                 f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
