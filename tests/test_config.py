@@ -75,7 +75,8 @@ def test_params_load_into_typed_blocks_from_any_working_directory(tmp_path, monk
     monkeypatch.chdir(tmp_path)
     params = config.load(REPO / "params.yaml")
     assert params.profile == RAW["profile"]
-    assert params.mfps.scales == tuple(RAW["mfps"]["scales"]) and params.features.n_normals == 9
+    assert params.mfps.scales == tuple(RAW["mfps"]["scales"])
+    assert params.features.n_normals == 9 + (params.features.pca_k is not None)
     assert params.noise.levels("test", "BigNoise") == RAW["noise"]["test"]["BigNoise"]
 
 

@@ -1,6 +1,8 @@
 """[P] Table network_architecture from the model definition: the counts of docs/algorithm.md §8 and the paper's
 two height-map modules (Refine-Net's, and the ablation's with a 256-channel last convolution and FC 512, 256, 192)."""
 
+from dataclasses import replace
+
 from settings import BASE
 
 from refinenet.network.model import architecture
@@ -9,7 +11,7 @@ from refinenet.network.summary import hmp_columns, layers, parameters
 
 def test_the_height_map_modules_and_parameter_counts():
     full = architecture(BASE.network, BASE.features, BASE.patches)
-    ablation = architecture(BASE.network.__class__(BASE.network.preset, "normals_hmps", "weight"), BASE.features,
+    ablation = architecture(replace(BASE.network, features="normals_hmps", connection="weight"), BASE.features,
                             BASE.patches)
     configs = {"full": full, "normals_hmps": ablation}
     assert parameters(configs)["full"] == 2_648_131  # docs/algorithm.md §8, points + HMPs, X = 9
