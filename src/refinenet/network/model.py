@@ -385,12 +385,12 @@ class RefineNet(nn.Module):
             self.height_map_module = HeightMapModule(config.n_normals, config.hmp_size, channels, hidden,
                                                      dims[-1], config.dropout)
         self.connections = nn.ModuleList(connections)
+        correction = config.output == "correction"
         if connections:
             self.output_module = OutputModule(config.n_normals * connections[0].out_dim, config.output_fc,
-                                              config.dropout, config.output == "correction")
+                                              config.dropout, correction)
         else:
-            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout,
-                                              config.output == "correction")
+            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout, correction)
 
     def forward(self, normals: Tensor, points: Tensor | None = None, heights: Tensor | None = None) -> Tensor:
         x = self.config.n_normals

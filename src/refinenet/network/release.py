@@ -175,7 +175,7 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "## Networks",
         "",
         f"- Architecture: {card['network']['preset']} preset, features {card['network']['features']}, "
-        f"connection {card['network']['connection']}, output {card['network'].get('output', 'normal')}; "
+        f"connection {card['network']['connection']}, output {(IMPLIED_NETWORK | card['network'])['output']}; "
         f"X = {card['n_normals']} normals, Kc = {card['n_clusters']} clusters, one network per cluster.",
         f"- Parameters: {card['parameters']['per_cluster']:,} per cluster network, "
         f"{card['parameters']['total']:,} in total; stored in float16, run in float32.",
