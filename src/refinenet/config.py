@@ -169,6 +169,8 @@ FRAME_MODES = ("canonical", "faithful")
 HEIGHT_DTYPES = ("float16", "float32")
 #: The estimators whose normals the pipeline computes and Refine-Net can refine (params.yaml `features.initial`).
 INITIAL_ESTIMATORS = ("mfps", "pca", "jet")
+#: The fewest neighbours of the features' jet normal (`FeatureConfig.jet_k`): a degree-2 jet's coefficients.
+JET_MIN_K = 6
 
 
 @dataclass(frozen=True)
@@ -203,6 +205,9 @@ class FeatureConfig:
     """Beyond the paper: append the PCA normal of this many neighbours to the X normals (X + 1, with its height
     map), so that the network sees a wide-neighbourhood fit where MFPS's fitting patches are wrong on smooth,
     curved surfaces (benchmarks/results/smooth_surface.md). None: the paper's X normals."""
+    jet_k: int | None = None
+    """Beyond the paper: append the degree-2 jet normal of this many neighbours after it (X + 1): on curved smooth
+    surfaces a jet follows the curvature that biases a wide PCA fit. None: no jet normal."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
@@ -213,6 +218,9 @@ class FeatureConfig:
             raise ValueError(f"r_f must be positive, got {self.r_f}")
         if self.pca_k is not None and self.pca_k < 3:
             raise ValueError(f"pca_k must be at least 3 (a plane needs 3 points) or None, got {self.pca_k}")
+        if self.jet_k is not None and self.jet_k < JET_MIN_K:
+            raise ValueError(f"jet_k must be at least {JET_MIN_K} (a degree-2 jet has {JET_MIN_K} coefficients) "
+                             f"or None, got {self.jet_k}")
         for name in ("sigma_s", "sigma_r"):
             values = getattr(self, name)
             if not values or any(not s > 0 for s in values):
@@ -229,9 +237,14 @@ class FeatureConfig:
             raise ValueError(f"heights_dtype '{self.heights_dtype}' is not one of {HEIGHT_DTYPES}")
 
     @property
+    def wide_normals(self) -> tuple[tuple[str, int], ...]:
+        """(estimator, k) of each wide-neighbourhood fit appended to the X normals, in their order."""
+        return tuple((method, k) for method, k in (("pca", self.pca_k), ("jet", self.jet_k)) if k is not None)
+
+    @property
     def n_normals(self) -> int:
         """X, the normals per point."""
-        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial) + int(self.pca_k is not None)
+        return len(self.sigma_s) * len(self.sigma_r) + int(self.include_initial) + len(self.wide_normals)
 
 
 @dataclass(frozen=True)
@@ -259,8 +272,9 @@ class NetworkParams:
     connection: str
     """How a feature module refines a normal: weight, rot, trans, concat, residual."""
     output: str
-    """normal ([P]: the network regresses the normal) or correction (beyond the paper: it regresses a change
-    of the initial normal, starting from no change)."""
+    """normal ([P]: the network regresses the normal), correction (beyond the paper: it regresses a change of
+    the initial normal, starting from no change) or blend (beyond the paper: a change of a learned weighted mean
+    of the X input normals, starting from almost the initial normal)."""
 
 
 PATCH_MODES = ("knn", "ball")

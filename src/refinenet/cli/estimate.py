@@ -135,7 +135,8 @@ def _margin(points: np.ndarray, tree, params: Params, method: str, runs_mfps: bo
     margin = MFPS_REACH * radius(params.mfps.k_bw) if runs_mfps else 0.0
     if method == "refinenet":
         f = params.features
-        margin += f.r_f * length + FEATURE_REACH * radius(max(f.hmp_k, params.patches.k, f.pca_k or 0))
+        widest = max(f.hmp_k, params.patches.k, *(k for _, k in f.wide_normals))
+        margin += f.r_f * length + FEATURE_REACH * radius(widest)
     return margin
 
 

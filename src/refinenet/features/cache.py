@@ -20,7 +20,7 @@ from refinenet.config import FeatureConfig
 from refinenet.data import io
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
-from refinenet.estimators.baselines import pca_normals
+from refinenet.estimators.baselines import jet_normals, pca_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames, target_sign
@@ -37,7 +37,7 @@ class Features:
 
     nf: np.ndarray
     """(N, 3X) float32, world frame: [n_first, f(s1, r1), ...] as `bilateral_filter` orders them, then the wide
-    PCA normal where `FeatureConfig.pca_k` asks for it."""
+    PCA and jet normals where `FeatureConfig.pca_k` and `jet_k` ask for them."""
     frames: np.ndarray
     """(N, 3, 3) float32: columns [e1 e2 e3] of the normal-tensor frame (§4)."""
     heights: np.ndarray
@@ -89,8 +89,7 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     rows = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
                           sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
-    if config.pca_k is not None:
-        nf = np.hstack([nf, wide_pca_normals(points, nf[:, :3], config.pca_k)])
+    nf = np.hstack([nf, *(wide_normals(points, nf[:, :3], method, k) for method, k in config.wide_normals)])
     frames = normal_frames(nf, config.frame_mode)
     tree = build_tree(points)
     extent = None if config.hmp_extent is None else config.hmp_extent * length
@@ -108,10 +107,13 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
                     centres=None if centres is None else rows)
 
 
-def wide_pca_normals(points: np.ndarray, n_first: np.ndarray, k: int) -> np.ndarray:
-    """(N, 3) float32 PCA normals of k neighbours (`FeatureConfig.pca_k`), each flipped to its n_first's side as
-    the filtered normals are, so that the extra normal carries no sign of its own."""
-    return target_sign(pca_normals(points, min(k, len(points))).astype(np.float32), n_first)
+def wide_normals(points: np.ndarray, n_first: np.ndarray, method: str, k: int) -> np.ndarray:
+    """(N, 3) float32 normals of a wide-neighbourhood fit (`FeatureConfig.wide_normals`: PCA, or a degree-2 jet, of
+    k neighbours), each flipped to its n_first's side as the filtered normals are, so that the extra normal carries
+    no sign of its own."""
+    k = min(k, len(points))
+    normals = pca_normals(points, k) if method == "pca" else jet_normals(points, k)
+    return target_sign(normals.astype(np.float32), n_first)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:

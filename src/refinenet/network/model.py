@@ -12,6 +12,7 @@ recommends and are noted in the docstring of the class that makes them.
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -26,8 +27,11 @@ from refinenet.errors import ParamsError
 
 FEATURES = ("full", "normals", "normals_points", "normals_hmps")
 CONNECTIONS = ("weight", "rot", "trans", "concat", "residual")
-#: What the output module gives: the normal itself ([P], [C]) or a correction to the first input normal.
-OUTPUTS = ("normal", "correction")
+#: What the output module gives: the normal itself ([P], [C]), a correction to the first input normal, or a
+#: weighted mean of the input normals plus a correction.
+OUTPUTS = ("normal", "correction", "blend")
+#: An untrained `blend` output's weight on the first input normal (the rest share what is left).
+BLEND_FIRST_WEIGHT = 0.9
 
 #: Per-point shared MLP of the point module (PointNet without T-Net).
 POINT_MLP = (64, 64, 64, 128, 1024)
@@ -69,7 +73,10 @@ class NetworkConfig:
     output: str = "normal"
     """normal: the output module regresses the normal ([P], [C]). correction (beyond the paper): it regresses a
     vector added to the first input normal (the initial normal when X = 9) before normalisation, and starts at
-    zero, so that an untrained network returns its input and training only has to learn the change."""
+    zero, so that an untrained network returns its input and training only has to learn the change. blend (beyond
+    the paper): it also regresses a softmax weight per input normal and adds the correction to their weighted mean,
+    so that where one input is right (a wide fit on a smooth surface, MFPS at an edge) the network can pick it
+    instead of regressing the whole change; untrained, it returns almost its first input normal."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point_fc", tuple(self.point_fc))
@@ -346,18 +353,33 @@ class ConnectionModule(nn.Module):
 
 class OutputModule(nn.Sequential):
     """Branches -> unit normal: BN on the input ([C]; kept in both presets, as the §8 parameter count of [P]'s
-    sizes includes it), FC with BN, ReLU, Dropout, a final Linear to 3, and L2 normalisation. With a `base`
-    (output "correction") the final Linear starts at zero and its output is added to the base first."""
+    sizes includes it), FC with BN, ReLU, Dropout, a final Linear to 3 (and X weights for `blend`), and L2
+    normalisation. For `correction` and `blend` (NetworkConfig.output) the final Linear starts at zero and its
+    3-vector is added to the first input normal, or to the weighted mean of the input normals, first."""
 
-    def __init__(self, in_dim: int, hidden: Sequence[int], dropout: float, correction: bool = False):
-        super().__init__(nn.BatchNorm1d(in_dim), *_fc((in_dim, *hidden, 3), dropout))
-        if correction:
+    def __init__(self, in_dim: int, hidden: Sequence[int], dropout: float, output: str = "normal",
+                 n_normals: int = 1):
+        weights = n_normals if output == "blend" else 0
+        super().__init__(nn.BatchNorm1d(in_dim), *_fc((in_dim, *hidden, 3 + weights), dropout))
+        self.output = output
+        if output != "normal":
             nn.init.zeros_(self[-1].weight)
             nn.init.zeros_(self[-1].bias)
+        if weights > 1:
+            with torch.no_grad():
+                self[-1].bias[3] = math.log(BLEND_FIRST_WEIGHT / (1 - BLEND_FIRST_WEIGHT) * (n_normals - 1))
 
-    def forward(self, x: Tensor, base: Tensor | None = None) -> Tensor:
+    def forward(self, x: Tensor, normals: Tensor) -> Tensor:
+        """`normals` (B, 3X): the input normals, each on its first's side."""
         y = super().forward(x)
-        return F.normalize(y if base is None else y + base.to(y.dtype), dim=1)
+        if self.output == "normal":
+            return F.normalize(y, dim=1)
+        if self.output == "correction":
+            return F.normalize(y + normals[:, :3].to(y.dtype), dim=1)
+        y = y.float()  # the mean of normals a degree apart needs more than bfloat16's 8 bits
+        weights = torch.softmax(y[:, 3:], dim=1)
+        mean = torch.einsum("bx,bxk->bk", weights, normals.float().reshape(len(y), -1, 3))
+        return F.normalize(y[:, :3] + mean, dim=1)
 
 
 class RefineNet(nn.Module):
@@ -385,20 +407,19 @@ class RefineNet(nn.Module):
             self.height_map_module = HeightMapModule(config.n_normals, config.hmp_size, channels, hidden,
                                                      dims[-1], config.dropout)
         self.connections = nn.ModuleList(connections)
-        correction = config.output == "correction"
         if connections:
             self.output_module = OutputModule(config.n_normals * connections[0].out_dim, config.output_fc,
-                                              config.dropout, correction)
+                                              config.dropout, config.output, config.n_normals)
         else:
-            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout, correction)
+            self.output_module = OutputModule(3 * config.n_normals, NORMALS_ONLY_FC, config.dropout, config.output,
+                                              config.n_normals)
 
     def forward(self, normals: Tensor, points: Tensor | None = None, heights: Tensor | None = None) -> Tensor:
         x = self.config.n_normals
         if normals.dim() != 2 or normals.shape[1] != 3 * x:
             raise ValueError(f"normals must have shape (B, {3 * x}), got {tuple(normals.shape)}")
-        base = normals[:, :3] if self.config.output == "correction" else None
         if not self.connections:
-            return self.output_module(normals, base)
+            return self.output_module(normals, normals)
         features = []
         if self.point_module is not None:
             if points is None or points.dim() != 3 or points.shape[2] != 3:
@@ -411,7 +432,7 @@ class RefineNet(nn.Module):
             features.append(self.height_map_module(heights))
         v = normals.reshape(-1, x, 3)
         branches = [conn(v[:, b], features) for b, conn in enumerate(self.connections)]
-        return self.output_module(torch.cat(branches, dim=1), base)
+        return self.output_module(torch.cat(branches, dim=1), normals)
 
 
 def fuse_batch_norm(model: RefineNet) -> RefineNet:

@@ -312,9 +312,12 @@ _FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geomet
         "estimators.strata", "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK,
         *_TABLE, *_STAGE)
 
+#: How a table caption names a Refine-Net output beyond the paper's (NetworkConfig.output).
+OUTPUT_CAPTIONS = {"correction": "output a correction of the initial normal, ",
+                   "blend": "output a correction of a learned weighted mean of the input normals, "}
 #: The keys that fix the network (`network.model.architecture`): X and m come from the features block.
 _ARCHITECTURE = ("features.sigma_s", "features.sigma_r", "features.include_initial", "features.hmp_size",
-                 "features.pca_k", "network", "patches")
+                 "features.pca_k", "features.jet_k", "network", "patches")
 #: The steps run once per Refine-Net variant, the keys each reads, and the steps whose files it reads. A variant
 #: has its own instance of a step when its overrides reach the step's keys or it has one of an upstream step;
 #: otherwise it uses full's files.
@@ -526,11 +529,12 @@ class Pipeline:
         if table.variants:
             reference = self.params[REFERENCE if REFERENCE in table.variants else FULL]
             f, n, t, pa = reference.features, reference.network, reference.training, reference.patches
+            wide = " and ".join(f"a {METHOD_NAMES[m]} K = {k}" for m, k in f.wide_normals)
             parts.append(
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
-                + ("output a correction of the initial normal, " if n.output == "correction" else "") +
+                + OUTPUT_CAPTIONS.get(n.output, "") +
                 f"Kc = {reference.clustering.n_clusters}, X = {f.n_normals}"
-                + (f" (the last a PCA K = {f.pca_k} normal)" if f.pca_k else "") +
+                + (f" (the last {wide} normal)" if wide else "") +
                 f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
