@@ -159,7 +159,7 @@ def findings(pooled_means: dict[str, dict[str, float]], rows: list[dict]) -> lis
             f"{r['name']} ({r['candidate_share']:.0%} candidates, Refine-Net {r['mean']['refinenet']:.2f}, "
             f"PCA {r['mean']['pca']:.2f})" for r in worst) + ".",
         f"- Feeding K = 100 PCA normals on the others (the hybrid input) moves Refine-Net's SmoothSurface mean from "
-        f"{p['refinenet']['all']:.2f} to {p['refinenet_hybrid']['all']:.2f} with networks trained on MFPS inputs; "
+        f"{p['refinenet']['all']:.2f} to {p['refinenet_hybrid']['all']:.2f} with networks trained to refine MFPS; "
         f"PCA K = 100 is at {p['pca']['all']:.2f} and Jet at {p['jet']['all']:.2f}.",
     ]
 
