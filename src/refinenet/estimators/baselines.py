@@ -23,11 +23,15 @@ def neighbourhood_size(config: BaselineConfig, method: str, category: str | None
 
 def baseline_normals(points: np.ndarray, method: str, config: BaselineConfig, category: str | None) -> np.ndarray:
     """Normals of `method` (pca or jet) with the paper's neighbourhood for the cloud's category."""
-    k = neighbourhood_size(config, method, category)
+    return fit_normals(points, method, neighbourhood_size(config, method, category), config.jet_degree)
+
+
+def fit_normals(points: np.ndarray, method: str, k: int, degree: int = 2) -> np.ndarray:
+    """Normals of `method` (pca, or a jet of `degree`) fitted to the k nearest neighbours of every point."""
     if method == "pca":
         return pca_normals(points, k)
     if method == "jet":
-        return jet_normals(points, k, config.jet_degree)
+        return jet_normals(points, k, degree)
     raise ValueError(f"unknown baseline '{method}' (one of {METHODS})")
 
 

@@ -20,7 +20,7 @@ from refinenet.config import FeatureConfig
 from refinenet.data import io
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
-from refinenet.estimators.baselines import jet_normals, pca_normals
+from refinenet.estimators.baselines import fit_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames, target_sign
@@ -111,9 +111,7 @@ def wide_normals(points: np.ndarray, n_first: np.ndarray, method: str, k: int) -
     """(N, 3) float32 normals of a wide-neighbourhood fit (`FeatureConfig.wide_normals`: PCA, or a degree-2 jet, of
     k neighbours), each flipped to its n_first's side as the filtered normals are, so that the extra normal carries
     no sign of its own."""
-    k = min(k, len(points))
-    normals = pca_normals(points, k) if method == "pca" else jet_normals(points, k)
-    return target_sign(normals.astype(np.float32), n_first)
+    return target_sign(fit_normals(points, method, min(k, len(points))).astype(np.float32), n_first)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:
