@@ -77,8 +77,9 @@ def main() -> int:
         "seeds": [pipe.params[v].seed for v in variants],
         "training": {"max_epochs": full.training.max_epochs, "batch_size": full.training.batch_size,
                      "max_train_points_per_cloud": full.training.max_train_points_per_cloud,
-                     "precision": full.training.precision},
-        "network_output": full.network.output, "pca_k": full.features.pca_k, "inference_points": full.inference.points,
+                     "resample_points": full.training.resample_points, "precision": full.training.precision},
+        "network_output": full.network.output, "pca_k": full.features.pca_k, "jet_k": full.features.jet_k,
+        "inference_points": full.inference.points,
         "table": table.to_dict(orient="index"), "spread": stats.to_dict(orient="index"),
         "target": TARGET, "met": bool(average["spread"] <= TARGET),
     }
@@ -89,9 +90,11 @@ def main() -> int:
         f"{commit}) whose "
         f"`{TABLE}` was made with `variant_budget: {{}}`: every seed variant ({', '.join(variants[1:])}) "
         f"clusters, trains ({full.training.max_epochs} epochs, batch {full.training.batch_size}, "
-        f"{full.training.max_train_points_per_cloud} points per cloud and cluster, network output "
-        f"`{full.network.output}`, PCA input K = {full.features.pca_k}) and scores every point as full does, on "
-        "full's clouds, MFPS normals and features; the first row is full itself (the run's main tables).",
+        f"{full.training.max_train_points_per_cloud} points per cloud and cluster"
+        + (" drawn anew every epoch" if full.training.resample_points else "") + ", network output "
+        f"`{full.network.output}`, PCA input K = {full.features.pca_k}, Jet input K = {full.features.jet_k}) and "
+        "scores every point as full does, on full's clouds, MFPS normals and features; the first row is full "
+        "itself (the run's main tables).",
         "",
         "Mean / RMSE in degrees:",
         "",

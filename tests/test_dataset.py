@@ -103,6 +103,26 @@ def test_cap_is_drawn_once(clouds):
     np.testing.assert_array_equal(capped.val.point, again.val.point)
 
 
+def test_resampled_cap_draws_each_epoch_anew_from_the_training_points_only(clouds):
+    fixed = cluster_samples(clouds, 0, seed=1, max_train_points_per_cloud=40)
+    data = cluster_samples(clouds, 0, seed=1, max_train_points_per_cloud=40, resample_points=True)
+    np.testing.assert_array_equal(data.epoch_samples(1).point, fixed.train.point)
+    np.testing.assert_array_equal(fixed.epoch_samples(3).point, fixed.train.point)
+    np.testing.assert_array_equal(data.val.point, fixed.val.point)
+    seen = [set() for _ in clouds]
+    for epoch in range(1, 6):
+        samples = data.epoch_samples(epoch)
+        np.testing.assert_array_equal(samples.point, data.epoch_samples(epoch).point)  # a resumed epoch's draw
+        for i in range(len(clouds)):
+            points = samples.point[samples.cloud == i]
+            assert len(points) == 40 and len(set(points)) == 40
+            assert set(points) <= set(data.pools[i]) and not set(points) & set(data.val.point[data.val.cloud == i])
+            seen[i] |= set(points)
+    # Cluster 0 holds about 1/3 of 1200 and 900 points, 80% of them training points (about 320 and 240): five
+    # draws of 40 see about 156 and 144 of them, against 40 for the cap drawn once.
+    for i in range(len(clouds)):
+        assert 100 < len(seen[i]) <= len(data.pools[i])
+
 def test_batches(clouds):
     data = cluster_samples(clouds, 1, seed=0)
     n = len(data.train)

@@ -50,13 +50,16 @@ def test_loss_decreases_on_a_learnable_problem(tmp_path, clouds):
     assert torch.load(tmp_path / BEST, weights_only=True)["epoch"] == result.best_epoch
 
 
-@pytest.mark.parametrize("schedule, precision", [("constant", "float32"), ("cosine", "float32"),
-                                                 ("cosine", "bfloat16")])
-def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, schedule, precision):
+@pytest.mark.parametrize("schedule, precision, resample", [("constant", "float32", False),
+                                                           ("cosine", "float32", False),
+                                                           ("cosine", "bfloat16", False),
+                                                           ("constant", "float32", True)])
+def test_resume_after_a_kill_is_bit_identical(tmp_path, clouds, monkeypatch, schedule, precision, resample):
     """The full network (dropout, BN, patches, heights) for 3 epochs, against 2 epochs, a kill inside epoch 3 (after
-    its optimiser steps), and a resumption; the cosine schedule needs no state of its own."""
+    its optimiser steps), and a resumption; the cosine schedule and the points drawn anew every epoch need no
+    state of their own."""
     config = train_config(batch_size=16, max_epochs=3, seed=4, max_train_points_per_cloud=48, threads=1,
-                          lr_schedule=schedule, precision=precision)
+                          lr_schedule=schedule, precision=precision, resample_points=resample)
     full = preset("release")
     data = cluster_data(clouds[1:], 0, config, patch_config())
     train_cluster(config, full, data, tmp_path / "straight", progress=False)

@@ -347,6 +347,9 @@ class TrainConfig:
     """Share of each cloud's points held out for validation, stratified by cluster ([P], §1.4)."""
     max_train_points_per_cloud: int | None
     """Random subset (drawn once) of each cloud's training points of the cluster, for CPU profiles; None: all."""
+    resample_points: bool
+    """Draw that subset anew every epoch: as many steps, more of the clouds' points seen (fewer of them shared by
+    two seeds' trainings). Beyond the paper; no effect without a cap."""
     device: str
     """auto (cuda when available), cpu or cuda."""
     precision: str = "float32"

@@ -168,10 +168,12 @@ class ClusterData:
     Each cloud's split and point cap use the generator seeded with (seed, cloud position), so they are the same
     for every cluster and every run. `max_train_points_per_cloud` keeps a random subset (drawn once) of each
     cloud's training points, and caps its validation points in proportion (val_fraction / (1 - val_fraction)).
+    With `resample`, epochs after the first draw that subset anew (`epoch_samples`): the same cost per epoch,
+    but the training sees more of the clouds' points.
     """
 
     def __init__(self, clouds: Sequence[PreparedCloud], cluster: int, patch: PatchConfig, val_fraction: float,
-                 seed: int, max_train_points_per_cloud: int | None):
+                 seed: int, max_train_points_per_cloud: int | None, resample: bool = False):
         if not 0.0 < val_fraction < 1.0:
             raise ValueError(f"val_fraction must be in (0, 1), got {val_fraction}")
         if max_train_points_per_cloud is not None and max_train_points_per_cloud < 1:
@@ -179,20 +181,32 @@ class ClusterData:
         if any(cloud.normals is None for cloud in clouds):
             raise ValueError("training clouds need ground-truth normals")
         self.clouds, self.cluster, self.patch = list(clouds), cluster, patch
+        self.seed, self.limit, self.resample = seed, max_train_points_per_cloud, resample
         max_val = None
         if max_train_points_per_cloud is not None:
             max_val = max(1, round(max_train_points_per_cloud * val_fraction / (1.0 - val_fraction)))
+        self.pools: list[np.ndarray] = []  # each cloud's training points before the cap
         train, val = [], []
         for i, cloud in enumerate(self.clouds):
             rng = np.random.default_rng([seed, i])
             held_out = holdout_mask(cloud.clusters, val_fraction, rng)
             mine = cloud.clusters == cluster
-            train.append(_cap(np.flatnonzero(mine & ~held_out), max_train_points_per_cloud, rng))
+            self.pools.append(np.flatnonzero(mine & ~held_out))
+            train.append(_cap(self.pools[-1], max_train_points_per_cloud, rng))
             val.append(_cap(np.flatnonzero(mine & held_out), max_val, rng))
         self.train, self.val = _samples(train), _samples(val)
         if patch.mode == "ball":  # built here, before loader workers fork, so that they share the grids
             for cloud in self.clouds:
                 cloud.ball_grid(patch.radius * cloud.length)
+
+    def epoch_samples(self, epoch: int) -> Samples:
+        """The training samples of `epoch` (1-based): `train`, or with `resample` after the first epoch a new
+        capped subset of each cloud's training points, seeded by (seed, cloud position, epoch) so that a resumed
+        epoch draws the same one. Every epoch has as many samples as `train`."""
+        if not self.resample or epoch == 1:
+            return self.train
+        return _samples([_cap(pool, self.limit, np.random.default_rng([self.seed, i, epoch]))
+                         for i, pool in enumerate(self.pools)])
 
     def batches(self, samples: Samples, batch_size: int, network: NetworkConfig, seed: Sequence[int],
                 shuffle: bool, drop_last: bool, workers: int = 0) -> Iterable[Inputs]:

@@ -78,7 +78,8 @@ def cluster_data(clouds: Sequence[PreparedCloud], cluster: int, config: TrainCon
                  patch: PatchConfig) -> ClusterData:
     """The samples of one cluster with the split and caps that `config` fixes."""
     return ClusterData(clouds, cluster, patch, val_fraction=config.val_fraction, seed=config.seed,
-                       max_train_points_per_cloud=config.max_train_points_per_cloud)
+                       max_train_points_per_cloud=config.max_train_points_per_cloud,
+                       resample=config.resample_points)
 
 
 def network_fingerprint(network: NetworkConfig) -> str:
@@ -177,7 +178,7 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
         epoch = state["epoch"] + 1
         start = time.perf_counter()
         torch.manual_seed(int(np.random.SeedSequence([config.seed, epoch]).generate_state(1)[0]))
-        batches = tqdm(data.batches(data.train, batch_size, network, (config.seed, epoch), shuffle=True,
+        batches = tqdm(data.batches(data.epoch_samples(epoch), batch_size, network, (config.seed, epoch), shuffle=True,
                                     drop_last=True, workers=config.loader_workers),
                        total=n_train // batch_size, desc=f"cluster {data.cluster} epoch {epoch}", leave=False,
                        disable=not progress)

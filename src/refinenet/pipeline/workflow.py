@@ -539,6 +539,7 @@ class Pipeline:
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
                 + (f", at most {t.max_train_points_per_cloud} training points per cloud"
+                   + (" (drawn anew every epoch)" if t.resample_points else "")
                    if t.max_train_points_per_cloud else "") + ".")
         budget = self.changes(REFERENCE)
         if REFERENCE in table.variants and budget:
