@@ -12,7 +12,8 @@ so that the seed variants train, infer and score exactly as full does and `refer
 
 Spread: (largest - smallest) / mean of the seeds, per category and metric. The run's params are checked: every
 seed variant must differ from full in its seed alone. Writes benchmarks/results/seeds.json and seeds.md, and copies
-the run's table beside them (seeds.csv).
+the run's table beside them (seeds.csv); `--name` changes the file names, for a candidate setting's run kept beside
+the profile's own.
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("run", type=Path, help="the repository root of a finished run with reports/table_seeds.csv")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--name", default="seeds", help="of the written files (NAME.md, NAME.json, NAME.csv)")
     args = parser.parse_args()
     csv = args.run / "reports" / f"{TABLE}.csv"
     if not csv.is_file():
@@ -116,8 +118,8 @@ def main() -> int:
               f"{verdict}).**", "",
               "Cost of each seed variant (its clustering, training and inference; job seconds on this run's "
               "machine): " + ", ".join(f"{v} {s:,.0f} s" for v, s in cost.items()) + ".", ""]
-    write_results(args.out, "seeds", record, "\n".join(lines))
-    shutil.copyfile(csv, args.out / "seeds.csv")
+    write_results(args.out, args.name, record, "\n".join(lines))
+    shutil.copyfile(csv, args.out / f"{args.name}.csv")
     print("\n".join(lines))
     return 0
 

@@ -347,15 +347,16 @@ class TrainConfig:
     """Share of each cloud's points held out for validation, stratified by cluster ([P], §1.4)."""
     max_train_points_per_cloud: int | None
     """Random subset (drawn once) of each cloud's training points of the cluster, for CPU profiles; None: all."""
-    resample_points: bool
-    """Draw that subset anew every epoch: as many steps, more of the clouds' points seen (fewer of them shared by
-    two seeds' trainings). Beyond the paper; no effect without a cap."""
     device: str
     """auto (cuda when available), cpu or cuda."""
     precision: str = "float32"
     """float32 ([P]) or bfloat16: the forward and backward passes compute in bfloat16 (autocast) while weights and
     optimiser state stay float32, 1.5x faster on a CPU with native bfloat16 (benchmarks/results/training.md);
     auto picks bfloat16 only there. Beyond the paper. (Releases exported before it existed trained in float32.)"""
+    resample_points: bool = False
+    """Draw the `max_train_points_per_cloud` subset anew every epoch: as many steps, more of the clouds' points
+    seen (fewer of them shared by two seeds' trainings). Beyond the paper; no effect without a cap. (Releases
+    exported before it existed drew it once.)"""
     seed: int = 0
     """Seeds the initial weights, the validation split, the point caps, shuffling, patches and dropout."""
     threads: int | None = None
