@@ -95,8 +95,8 @@ def main() -> int:
         f"{full.training.max_train_points_per_cloud} points per cloud and cluster"
         + (" drawn anew every epoch" if full.training.resample_points else "") + ", network output "
         f"`{full.network.output}`, PCA input K = {full.features.pca_k}, Jet input K = {full.features.jet_k}) and "
-        "scores every point as full does, on full's clouds, MFPS normals and features; the first row is full "
-        "itself (the run's main tables).",
+        "scores every point as full does, on full's clouds, MFPS normals and features; the first row is "
+        "`reference`, which has full's settings and seed.",
         "",
         "Mean / RMSE in degrees:",
         "",
