@@ -123,6 +123,7 @@ def test_resampled_cap_draws_each_epoch_anew_from_the_training_points_only(cloud
     for i in range(len(clouds)):
         assert 100 < len(seen[i]) <= len(data.pools[i])
 
+
 def test_batches(clouds):
     data = cluster_samples(clouds, 1, seed=0)
     n = len(data.train)
