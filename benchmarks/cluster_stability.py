@@ -23,8 +23,7 @@ from machine import machine_info, write_results
 
 from refinenet.config import load
 from refinenet.data.noise import derive_seed
-from refinenet.features.cache import load_features
-from refinenet.network.clustering import assign, fit_clusters, local_normals
+from refinenet.network.clustering import assign, fit_clusters, pooled_local_normals
 
 RESULTS = Path(__file__).parent / "results"
 SEEDS = (2022, 2023, 2024)
@@ -45,7 +44,7 @@ def main() -> int:
     paths = sorted((args.run / "results" / "features" / "full" / "train").rglob("*.npz"))
     if not paths:
         sys.exit(f"cluster_stability: {args.run}: no training features under results/features/full/train")
-    pooled = np.concatenate([local_normals(f.nf, f.frames) for f in (load_features(p)[0] for p in paths)])
+    pooled = pooled_local_normals(paths)
     k = params.clustering.n_clusters
     labels, sizes = {}, {}
     for seed, restarts in itertools.product(SEEDS, RESTARTS):

@@ -1,10 +1,8 @@
 """Fit the normal-based clustering (PCA to 3 components + k-means, docs/algorithm.md §5) on the training clouds."""
 
-import numpy as np
 
 from refinenet.data.noise import derive_seed
-from refinenet.features.cache import load_features
-from refinenet.network.clustering import fit_clusters, local_normals, save_cluster_model
+from refinenet.network.clustering import fit_clusters, pooled_local_normals, save_cluster_model
 from refinenet.pipeline import stage
 
 
@@ -14,12 +12,8 @@ def arguments(parser):
 
 
 def main(params, args):
-    pooled = []
-    for path in args.features:
-        features, _ = load_features(path)
-        pooled.append(local_normals(features.nf, features.frames))
     seed = derive_seed(params.seed, "clusters")
-    model = fit_clusters(np.concatenate(pooled), params.clustering, seed)
+    model = fit_clusters(pooled_local_normals(args.features), params.clustering, seed)
     save_cluster_model(args.out, model, {"training_clouds": len(args.features), "seed": seed})
 
 

@@ -7,6 +7,7 @@ gets its own network, so each network sees a narrower input distribution. The fe
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,6 +17,7 @@ import numpy as np
 from refinenet.config import ClusteringConfig
 from refinenet.data.io import load_record, save_record
 from refinenet.errors import InputError
+from refinenet.features.cache import load_features
 from refinenet.geometry.frames import to_local
 
 #: PCA components kept (§5).
@@ -29,6 +31,11 @@ MAX_ITERATIONS = 100
 def local_normals(nf: np.ndarray, frames: np.ndarray) -> np.ndarray:
     """The clustering feature and the network's normal input: every normal of nf (N, 3X) in its point's frame."""
     return to_local(frames, nf.reshape(len(nf), -1, 3)).reshape(len(nf), -1)
+
+
+def pooled_local_normals(feature_paths: Sequence[str | Path]) -> np.ndarray:
+    """The clustering features of every point of the given feature caches (the training clouds'), stacked."""
+    return np.concatenate([local_normals(f.nf, f.frames) for f in (load_features(p)[0] for p in feature_paths)])
 
 
 @dataclass(frozen=True)
