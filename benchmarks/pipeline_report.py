@@ -15,6 +15,7 @@ import platform
 from pathlib import Path
 
 import pandas as pd
+from machine import machine_info
 
 from refinenet.pipeline.timing import read_benchmark
 from refinenet.pipeline.workflow import FULL, VARIANT_STEPS
@@ -72,8 +73,8 @@ def main() -> None:
         f"# Pipeline run, profile `{args.profile}`",
         "",
         f"`{args.command}` on a fresh clone: **{duration(args.wall_seconds)}** wall time in total "
-        f"(environment set-up included), on {os.cpu_count()} cores, {platform.machine()}, Python "
-        f"{platform.python_version()}. Job seconds are summed over jobs that ran two at a time." +
+        f"(environment set-up included), on {os.cpu_count()} cores ({machine_info()['cpu']}), {platform.machine()}, "
+        f"Python {platform.python_version()}. Job seconds are summed over jobs that ran two at a time." +
         (f" {args.note}" if args.note else ""),
         "",
         family_totals(summary),
