@@ -10,7 +10,6 @@ Usage: python benchmarks/pipeline_report.py RUN_DIR --wall-seconds S --profile c
 from __future__ import annotations
 
 import argparse
-import os
 import platform
 from pathlib import Path
 
@@ -69,12 +68,13 @@ def main() -> None:
     parser.add_argument("--note", default="", help="how the run went, when not in one piece (a sentence)")
     args = parser.parse_args()
     summary = rule_summary(args.run_dir)
+    machine = machine_info()
     lines = [
         f"# Pipeline run, profile `{args.profile}`",
         "",
         f"`{args.command}` on a fresh clone: **{duration(args.wall_seconds)}** wall time in total "
-        f"(environment set-up included), on {os.cpu_count()} cores ({machine_info()['cpu']}), {platform.machine()}, "
-        f"Python {platform.python_version()}. Job seconds are summed over jobs that ran two at a time." +
+        f"(environment set-up included), on {machine['cores']} cores ({machine['cpu']}), {platform.machine()}, "
+        f"Python {machine['python']}. Job seconds are summed over jobs that ran two at a time." +
         (f" {args.note}" if args.note else ""),
         "",
         family_totals(summary),
