@@ -42,7 +42,7 @@ from refinenet import config  # noqa: E402
 from refinenet.pipeline.workflow import FULL, HISTORY_DIR, MODEL_DIR, Pipeline, clouds, gpus  # noqa: E402
 
 #: Rules whose jobs each read one cloud: cost proportional to its points.
-PER_CLOUD = ("clouds_train", "clouds_test", "mfps", "simple_mfps", "baselines", "features", "inference")
+PER_CLOUD = ("clouds_train", "clouds_test", "mfps", "mfps_train", "baselines", "features", "inference")
 GPU_RULES = ("training", "inference")
 #: The release network on one H100 (fp32), measured on a lent GPU machine (the issue's numbers, not this run's).
 H100_TRAIN_SAMPLES_S = 65_000

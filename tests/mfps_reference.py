@@ -60,8 +60,9 @@ def reference_bandwidth(points: np.ndarray, knn: np.ndarray, k0: int, k_bw: int)
     return np.array([err[knn[i, :k_bw]].mean() for i in range(n)])
 
 
-def reference_mfps(points: np.ndarray, config: MFPSConfig) -> np.ndarray:
-    """MFPS normals by the letter of docs/algorithm.md §2 (same seed -> same trials as the vectorised code)."""
+def reference_mfps(points: np.ndarray, config: MFPSConfig, simple: bool = False) -> np.ndarray:
+    """MFPS normals by the letter of docs/algorithm.md §2 (same seed -> same trials as the vectorised code); `simple`:
+    those of the simple-MFPS ablation (the highest-scoring patch)."""
     points = np.asarray(points, dtype=np.float64)
     n = len(points)
     k0, k_max, k_bw = config.k0, config.scales[-1], config.k_bw
@@ -116,7 +117,7 @@ def reference_mfps(points: np.ndarray, config: MFPSConfig) -> np.ndarray:
     normals = normal.copy()
     for c, patches in registered.items():
         ranked = sorted(patches, key=lambda t: -t[0])  # stable: ties keep registration order
-        if config.simple:
+        if simple:
             normals[c] = ranked[0][2]
             continue
         p_c, neighbourhood = points[c], points[knn[c, :k0]]

@@ -248,7 +248,7 @@ def _stage_job(case: Case, entry: str, tmp: Path) -> tuple[Path, Path, str, list
     if entry == "stages.baselines":
         return folder, path, "baselines", ["--method", "pca", "--cloud", path]
     if entry == "stages.mfps":
-        return folder, path, "mfps", ["--method", "mfps", "--cloud", path]
+        return folder, path, "mfps", ["--cloud", path]
     if case.kind == "normals":
         return folder, path, "features", ["--cloud", good_cloud, "--initial", path]
     return folder, path, "features", ["--cloud", path, "--initial", good_normals]

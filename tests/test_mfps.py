@@ -17,6 +17,7 @@ from refinenet.estimators.mfps import (
     eta_weights,
     knee_threshold,
     l1_trend_filter,
+    mfps_and_simple_normals,
     mfps_normals,
     residual_bandwidth,
     smallest_eigenvectors_3x3,
@@ -245,17 +246,21 @@ def test_eta_reproduces_the_table_of_a4():
 
 @pytest.mark.parametrize("config", [
     mfps_config(scales=(8, 16, 24), trials=40, theta_t=45.0),
-    mfps_config(scales=(8, 16, 24), trials=40, eta="paper", simple=True, seed=3),
+    mfps_config(scales=(8, 16, 24), trials=40, eta="paper", seed=3),
     mfps_config(scales=(10, 20), trials=30, theta_t=30.0, a_max=3),
 ])
 def test_vectorised_mfps_agrees_with_the_literal_reference(config):
-    """Same seed, same trials. Scores are float32 in the fast code, so a near-tie between two trials or two
-    patches could in principle resolve differently; in practice all normals agree to rounding."""
+    """Same seed, same trials, for MFPS and its simple-MFPS ablation. Scores are float32 in the fast code, so a
+    near-tie between two trials or two patches could in principle resolve differently; in practice all normals
+    agree to rounding."""
     pts, _, _, _ = dihedral(90, n=900, noise=0.004, seed=1)
-    fast, slow = mfps_normals(pts, config), reference_mfps(pts, config)
-    deviation = np.abs(np.abs(np.einsum("ij,ij->i", fast, slow)) - 1.0)
-    assert np.mean(deviation < 1e-12) >= 0.99
-    np.testing.assert_allclose(np.linalg.norm(fast, axis=1), 1.0)
+    both = mfps_and_simple_normals(pts, config)
+    np.testing.assert_array_equal(both["mfps"], mfps_normals(pts, config))
+    for method, simple in (("mfps", False), ("simple_mfps", True)):
+        fast, slow = both[method], reference_mfps(pts, config, simple)
+        deviation = np.abs(np.abs(np.einsum("ij,ij->i", fast, slow)) - 1.0)
+        assert np.mean(deviation < 1e-12) >= 0.99, method
+        np.testing.assert_allclose(np.linalg.norm(fast, axis=1), 1.0)
 
 
 def test_output_is_bit_identical_across_runs_threads_and_chunk_sizes(monkeypatch):
@@ -284,7 +289,8 @@ def test_dihedral_edges_beat_pca(angle, theta_t):
 @pytest.fixture(scope="module")
 def step_normals():
     pts, truth, concave, convex, spacing = step(0.15)
-    full, simple = mfps_normals(pts, mfps_config()), mfps_normals(pts, mfps_config(simple=True))
+    both = mfps_and_simple_normals(pts, mfps_config())
+    full, simple = both["mfps"], both["simple_mfps"]
     return pts, truth, concave, convex, spacing, full, simple
 
 

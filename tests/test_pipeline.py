@@ -191,7 +191,7 @@ def family(name: str) -> set[str]:
         ("  jet_k: 100", "  jet_k: 90",
          family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE | REPORT),
         ("  theta_t: 60", "  theta_t: 45",
-         {"mfps", "simple_mfps"} | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
+         family("mfps") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE | REPORT),
         ("seed: 2022", "seed: 7", SEEDED | RELEASE),  # the page tracks the seed: in SEEDED
         ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",

@@ -115,8 +115,14 @@ def test_each_job_command_names_its_own_method_and_table(tmp_path):
     normals = re.compile(r"--method (\w+) .*--out results/normals/(\w+)/")
     tables = re.compile(r"stages\.table --table (\w+)")
     methods = [normals.search(c).groups() for c in commands if "--method" in c]
-    assert {m for m, _ in methods} == {"pca", "jet", "mfps", "simple_mfps"}
+    assert {m for m, _ in methods} == {"pca", "jet"}
     assert all(method == folder for method, folder in methods)
+    mfps = re.compile(r"--cloud results/clouds/(\S+)\.npz --out results/normals/mfps/(\S+)\.npy"
+                      r"(?: --simple-out results/normals/simple_mfps/(\S+)\.npy)? ")
+    outs = [mfps.search(c).groups() for c in commands if "stages.mfps" in c]
+    assert len(outs) == len(PIPELINE.keys())
+    assert all(cloud == out and (simple == cloud if cloud.startswith("test/") else simple is None)
+               for cloud, out, simple in outs)
     assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(workflow.TABLES)
 
 

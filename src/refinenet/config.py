@@ -124,8 +124,6 @@ class MFPSConfig:
     """Knee rule: the filtered histogram has flattened when x[b-1] - x[b+1] is below this."""
     drop_tol: float = 0.05
     """Knee rule: the threshold bin must lie this far below the peak."""
-    simple: bool = False
-    """"Simple MFPS" ablation ([P] §Ablation): the highest-scoring patch, no anisotropic selection."""
     seed: int = 0
     """Seed of the random trials; the same seed gives bit-identical normals."""
 

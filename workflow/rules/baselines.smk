@@ -23,6 +23,7 @@ for step in PIPE.family("baselines"):
         benchmark:
             "logs/baselines/{method}/{cloud}.benchmark.tsv"
         threads: 1
+        priority: split_priority(step.split)
         conda:
             "../envs/refinenet.yaml"
         shell:

@@ -20,6 +20,7 @@ for step in PIPE.family("clouds"):
         benchmark:
             "logs/clouds/{cloud}.benchmark.tsv"
         threads: 1
+        priority: split_priority(step.split)
         conda:
             "../envs/refinenet.yaml"
         shell:

@@ -41,6 +41,13 @@ def record_in_dvc():
         shell("python -m refinenet.pipeline.bridge record")
 
 
+def split_priority(split):
+    """Priority of a job on one cloud: a training cloud's before a test cloud's. Training, the longest step, waits for
+    every training cloud's features; the test clouds' jobs can fill the core it leaves idle while its last network
+    trains. Run the other way round, they delay its start instead (benchmarks/results/pipeline_cpu.md)."""
+    return int(split == "train")
+
+
 def installed(step):
     """Whether the program a step needs (if any) is installed; the default target skips the step, saying so, if not."""
     if step.needs and shutil.which(step.needs) is None:

@@ -23,6 +23,7 @@ for step in PIPE.family("features"):
         benchmark:
             wf.fill(wf.JOB_BENCHMARK, step=f"features/{step.variant}"),
         threads: 1
+        priority: lambda wildcards: split_priority(wildcards.cloud.split("/")[0])
         conda:
             "../envs/refinenet.yaml"
         shell:

@@ -1,29 +1,35 @@
-# Initial normals by multi-scale fitting patch selection (MFPS, docs/algorithm.md §2) and its simple-MFPS
-# ablation: one step each, as each feeds different consumers (MFPS: the features of every cloud). The shell
-# command is formatted when a job runs, after the loop has ended, so the loop variable reaches it as a param.
+# Initial normals by multi-scale fitting patch selection (MFPS, docs/algorithm.md §2): on the test clouds together
+# with its simple-MFPS ablation, which the same fitted patches give (one job for both), and on the training clouds
+# (mfps_train) alone. Training clouds' jobs go first (`split_priority`). The shell command is formatted when a job
+# runs, after the loop has ended, so what differs between the steps reaches it as a param.
 
-for method in ("mfps", "simple_mfps"):
+for step in PIPE.family("mfps"):
+    methods = [m for m in wf.MFPS_METHODS if PIPE.normals_dir(m, step.split) in step.outs]
+    simple_out = f"--simple-out {PIPE.normals_path('simple_mfps', '{cloud}')}" if "simple_mfps" in methods else ""
 
     rule:
         name:
-            method
+            step.name
         message:
-            f"{method} normals of {{wildcards.cloud}}"
+            f"{' and '.join(methods)} normals of {{wildcards.cloud}}"
         input:
-            code=PIPE.steps[method].code,
+            code=step.code,
             cloud=wf.CLOUD,
         output:
-            PIPE.normals_path(method, "{cloud}"),
+            **{m: PIPE.normals_path(m, "{cloud}") for m in methods},
+        wildcard_constraints:
+            cloud=rf"{step.split}/[^/]+/[^/]+",
         params:
-            tracked=tracked(method),
-            method=method,
+            tracked=tracked(step.name),
+            simple_out=simple_out,
         log:
-            wf.fill(wf.JOB_LOG, step=method),
+            wf.fill(wf.JOB_LOG, step=step.name),
         benchmark:
-            wf.fill(wf.JOB_BENCHMARK, step=method),
+            wf.fill(wf.JOB_BENCHMARK, step=step.name),
         threads: 1
+        priority: split_priority(step.split)
         conda:
             "../envs/refinenet.yaml"
         shell:
-            "python -m stages.mfps --method {params.method} --cloud {input.cloud} --out {output}"
-            " --threads {threads} 2>&1 | tee {log}"
+            "python -m stages.mfps --cloud {input.cloud} --out {output.mfps} {params.simple_out} --threads {threads}"
+            " 2>&1 | tee {log}"

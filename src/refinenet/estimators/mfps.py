@@ -34,7 +34,7 @@ from refinenet.data.io import check_array
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.neighbors import chunks, covariances, knn, smallest_eigenvectors
 
-#: The two methods of the step: MFPS and its "simple MFPS" ablation (the `simple` field of MFPSConfig).
+#: The two methods of the step: MFPS and its "simple MFPS" ablation, both from one set of fitted patches.
 METHODS = ("mfps", "simple_mfps")
 #: Elements of the R x k float32 residual matrix per chunk of patches (about 4 MB, so a chunk stays in cache).
 PATCH_CHUNK_ELEMENTS = 1 << 20
@@ -396,9 +396,10 @@ def eta_weights(scales: tuple[int, ...], form: str, beta: float = 0.9) -> np.nda
 
 def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates: np.ndarray,
                            pair_candidate: np.ndarray, pair_patch: np.ndarray, pair_score: np.ndarray,
-                           plane_m: np.ndarray, plane_n: np.ndarray, theta_t: float, a_max: int,
-                           simple: bool = False) -> np.ndarray:
-    """Normal (len(candidates), 3) of each candidate from its registered patches S_c (A.5).
+                           plane_m: np.ndarray, plane_n: np.ndarray, theta_t: float,
+                           a_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """Normals (len(candidates), 3) of each candidate from its registered patches S_c (A.5): MFPS's, and simple
+    MFPS's ([P] §Ablation: the highest-scoring patch, no anisotropic set), which is A's first member and so free.
 
     Pair s registers patch pair_patch[s] (plane (plane_m, plane_n)) with score D = pair_score[s] for
     candidate pair_candidate[s]; pairs come in registration order, which breaks ties in D. `centroids` are
@@ -413,7 +414,7 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
     cos_t = math.cos(math.radians(theta_t))
     usable = np.ones(n_pairs, dtype=bool)
     members: list[np.ndarray] = []  # per candidate, the patch of each member of A (-1: none)
-    for round_ in range(1 if simple else a_max):
+    for round_ in range(a_max):
         key = np.where(usable, pair_score, -np.inf)
         top = np.full(len(candidates), -np.inf)
         np.maximum.at(top, owner, key)
@@ -431,8 +432,6 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
                 dots = np.einsum("sd,sd->s", np.take(plane_n, pair_patch[sl], axis=0),
                                  np.take(member_n, owner[sl], axis=0))
                 usable[sl] &= np.abs(dots) < cos_t
-    if simple:
-        return plane_n[members[0]]
     p_c, qbar = points[candidates], centroids[candidates]
     offsets, normals = [], []
     for member in members:
@@ -441,7 +440,7 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
         offsets.append(np.where(member >= 0, np.einsum("cd,cd->c", n, m - p_c), np.inf))
         normals.append(n)
     choice = np.argmin(np.stack(offsets), axis=0)
-    return np.stack(normals)[choice, np.arange(len(candidates))]
+    return np.stack(normals)[choice, np.arange(len(candidates))], plane_n[members[0]]
 
 
 # --------------------------------------------------------------------------------------------------- all
@@ -450,7 +449,17 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
                  workers: int | None = None, stats: dict[str, float] | None = None,
                  length: float | None = None, ids: np.ndarray | None = None,
                  candidacy: Candidacy | None = None) -> np.ndarray:
-    """Unit, unoriented MFPS normals (N, 3) of a cloud (docs/algorithm.md §2).
+    """Unit, unoriented MFPS normals (N, 3) of a cloud (docs/algorithm.md §2); the arguments are
+    `mfps_and_simple_normals`'s."""
+    return mfps_and_simple_normals(points, config, progress, workers, stats, length, ids, candidacy)["mfps"]
+
+
+def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
+                            workers: int | None = None, stats: dict[str, float] | None = None,
+                            length: float | None = None, ids: np.ndarray | None = None,
+                            candidacy: Candidacy | None = None) -> dict[str, np.ndarray]:
+    """Unit, unoriented normals (N, 3) of a cloud by each of METHODS: MFPS (docs/algorithm.md §2) and its simple-MFPS
+    ablation, which differ only in the last step (A.5), so one pass fits the patches for both.
 
     `workers` threads fit the patches (default: the cores this process may use); the result does not
     depend on it. `progress` shows a bar per step. `stats`, when given, receives the wall and CPU seconds of
@@ -480,7 +489,7 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
         candidate[candidates] = True
     stats["candidates"] = len(candidates)
     if len(candidates) == 0:
-        return normals
+        return dict.fromkeys(METHODS, normals)
     with step("A.2 bandwidth"):
         sigma = residual_bandwidth(points, neighbours[:, :k0], centroids, normals, neighbours[:, :k_bw])
         sigma = np.maximum(sigma, SIGMA_FLOOR * (bbox_diagonal(points) if length is None else length))
@@ -494,14 +503,16 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
     with step("A.5 selection"):
         eta = eta_weights(config.scales, config.eta, config.beta)
         offsets = np.cumsum([0] + [len(f.m) for f in fits[:-1]], dtype=np.int32)
-        normals[candidates] = select_fitting_patches(
+        selected = select_fitting_patches(
             points, centroids, candidates,
             np.concatenate([f.pair_candidate for f in fits]),
             np.concatenate([f.pair_patch + o for f, o in zip(fits, offsets, strict=True)]),
             np.concatenate([f.pair_consistency * eta_k for f, eta_k in zip(fits, eta, strict=True)]),
             np.concatenate([f.m for f in fits]), np.concatenate([f.n for f in fits]),
-            config.theta_t, config.a_max, config.simple)
-    return normals
+            config.theta_t, config.a_max)
+    simple = normals.copy()
+    normals[candidates], simple[candidates] = selected
+    return dict(zip(METHODS, (normals, simple), strict=True))
 
 
 @contextmanager

@@ -702,10 +702,9 @@ class Pipeline:
                                                      *_GEOMETRY), ("baselines",), BASELINES, (split,))
               for name, split in (("baselines", "test"), ("baselines_train", "train"))
               if split == "test" or any(p.features.initial in BASELINES for p in self.params.values())),
-            self._normals_step("mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"), ("mfps",),
-                               SPLITS),
-            self._normals_step("simple_mfps", "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"),
-                               ("simple_mfps",)),
+            *(self._normals_step(name, "mfps", ("estimators.mfps", *_DATA, *_GEOMETRY), ("mfps", "seed"), methods,
+                                 (split,))
+              for name, split, methods in (("mfps", "test", MFPS_METHODS), ("mfps_train", "train", ("mfps",)))),
             *(step for v in self.params for step in self._variant_steps(v)),
             Step(
                 name="release", family="release",
