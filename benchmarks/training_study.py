@@ -129,7 +129,7 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
     # The precision the jobs resolved on their machine (`auto` is bfloat16 only on a CPU that has it natively).
     precisions = sorted({json.loads(path.read_text()).get("precision", "float32") for path in results})
     lines = ["", f"## The run's own training ({t.optimizer}, lr {t.lr}, {t.lr_schedule}, batch {t.batch_size}, "
-             f"{t.max_epochs} epochs, at most {t.max_train_points_per_cloud} points per cloud"
+             f"{t.max_epochs} epochs, {t.loss} loss, at most {t.max_train_points_per_cloud} points per cloud"
              + (" drawn anew every epoch" if t.resample_points else "") + ", "
              f"{' and '.join(precisions)}; network output {params.network.output}, "
              f"X = {params.features.n_normals} input normals)", "",

@@ -144,13 +144,16 @@ def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
 
 def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
     """The cpu profile's budget (2 epochs, 2,500 scored points) makes reference, full's settings under it, a trained
-    variant of its own: the Refine-Net row of every table of variants, scored like them on one subset, which the
-    main tables are not. With no budget written anywhere, reference is full and trains nothing."""
+    variant of its own: the Refine-Net row of every table of variants (table_loss's rows are both variants, L1 and
+    L2, whichever loss full has), scored like them on one subset, which the main tables are not. With no budget
+    written anywhere, reference is full and trains nothing."""
     assert PIPELINE.owners["reference"] == {"features": "full", "clustering": "full", "training": "reference",
                                             "inference": "reference"}
+    assert workflow.TABLES["table_loss"].methods == (workflow.refinenet("l1"), workflow.refinenet("l2"))
     for name in ("table_ablation", "table_loss", "table_initial", "table_clusters", "table_seeds"):
         table = workflow.TABLES[name]
-        assert workflow.refinenet("reference") in table.methods and workflow.REFINENET not in table.methods, name
+        assert name == "table_loss" or workflow.refinenet("reference") in table.methods, name
+        assert workflow.REFINENET not in table.methods, name
         assert PIPELINE.scored_subset(table.methods) == 2500, name
         assert "Every row scored on the same seeded 2500 points" in PIPELINE.caption(table), name
     assert PIPELINE.scored_subset(workflow.TABLES["table_synthetic"].methods) is None
@@ -166,7 +169,7 @@ def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
     assert unbudgeted.normals_path(workflow.refinenet("reference"), "test/a") == unbudgeted.normals_path("refinenet",
                                                                                                         "test/a")
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    raw["variants"]["l1"]["inference"] = {"points": 100}  # against reference's 2,500
+    raw["variants"]["l1"]["inference"] = {"points": 100}  # against l2's 2,500
     with pytest.raises(ParamsError, match=r"table_loss: its Refine-Net variants refine subsets of different sizes"):
         workflow.Pipeline(raw)
 
