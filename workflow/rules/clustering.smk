@@ -20,6 +20,7 @@ for step in PIPE.family("clustering"):
             f"logs/clustering/{step.variant}.log",
         benchmark:
             f"logs/clustering/{step.variant}.benchmark.tsv"
+        priority: split_priority("train")  # on the way to training: before the test clouds' jobs
         conda:
             "../envs/refinenet.yaml"
         shell:

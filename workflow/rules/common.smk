@@ -42,9 +42,10 @@ def record_in_dvc():
 
 
 def split_priority(split):
-    """Priority of a job on one cloud: a training cloud's before a test cloud's. Training, the longest step, waits for
-    every training cloud's features; the test clouds' jobs can fill the core it leaves idle while its last network
-    trains. Run the other way round, they delay its start instead (benchmarks/results/pipeline_cpu.md)."""
+    """Priority of a job of one split: a training cloud's (and the clustering's) before a test cloud's. Training, the
+    longest step, waits for every training cloud's features and the clusters; the test clouds' jobs can fill the core
+    it leaves idle while its last network trains. Run the other way round, they delay its start instead
+    (benchmarks/results/pipeline_cpu.md)."""
     return int(split == "train")
 
 
