@@ -126,6 +126,40 @@ def test_each_job_command_names_its_own_method_and_table(tmp_path):
     assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(workflow.TABLES)
 
 
+#: What Snakemake fills a shell command with when a job runs; any other name is the Snakefile's global, read then.
+JOB_NAMES = {"input", "output", "params", "wildcards", "threads", "resources", "log", "benchmark"}
+SHELL_LINE = re.compile(r'^\s*(f?)"(.*)"\s*$')
+
+
+def shell_placeholders(text: str) -> list[str] | None:
+    """The names a rule file's shell commands are formatted with at job time (`{name}` in a plain string, `{{name}}`
+    in an f-string), or None when a `shell:` is not followed by string literals this check can read."""
+    lines, names = text.splitlines(), []
+    for i, line in enumerate(lines):
+        if not re.match(r"^\s*shell:\s*$", line):
+            continue
+        literals = [SHELL_LINE.match(rest) for rest in lines[i + 1:]]
+        literals = [m.groups() for m in literals[:next((k for k, m in enumerate(literals) if not m), None)]]
+        if not literals:
+            return None
+        for is_f, body in literals:
+            names += re.findall(r"\{\{(\w+)", body) if is_f else re.findall(r"(?<!\{)\{(\w+)", body)
+    return names
+
+
+def test_shell_commands_name_only_what_a_job_fills_in():
+    """A rule defined in a loop formats its shell command when its job runs, after the loop has ended: a loop variable
+    named there gives every job the last value (the mfps rule's --simple-out once did, and the dry run printed the
+    right command, so the test above could not see it). What differs between a loop's rules reaches the command as a
+    param, so a command may name only the job's own attributes."""
+    assert shell_placeholders('    shell:\n        "stages.mfps {input.cloud} {simple_out} {{x}}"\n') == [
+        "input", "simple_out"]
+    for path in [REPO / "workflow/Snakefile", *(REPO / "workflow/rules").glob("*.smk")]:
+        names = shell_placeholders(path.read_text())
+        assert names is not None, f"{path.name}: a shell command this test cannot read"
+        assert set(names) <= JOB_NAMES, f"{path.name}: shell command names {set(names) - JOB_NAMES}"
+
+
 def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
     """l1 changes the loss: its own networks and normals, full's features and clusters. kc2 changes Kc: its own
     clusters too. A variant of the features owns every step."""
