@@ -10,6 +10,8 @@ and these are scored on each part:
 - "MFPS, PCA K = 100 elsewhere": MFPS on candidates, PCA K = 100 on the rest (an input Refine-Net could refine);
 - Refine-Net (the shipped networks, which are the default run's) refining MFPS (the table's row) and refining that
   hybrid input, with the pipeline's inference precision.
+- Refine-Net on the candidates and Jet elsewhere (a switch on MFPS's own feature test), and the better of the two on
+  each point (a bound no switch between them can pass).
 Errors are unoriented angles in degrees, pooled over points.
 
 `--run DIR --variant NAME` adds a retrained answer: the Refine-Net normals of variant NAME (e.g. `pca_input`,
