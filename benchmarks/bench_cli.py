@@ -42,6 +42,12 @@ from refinenet.network.release import CARD_JSON, SHIPPED
 
 RESULTS = Path(__file__).parent / "results"
 SHAPE, NOISE = "fandisk_a", 0.1
+
+
+def noisy_cloud(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The benchmark's cloud of n points and its true normals (also cuda_check's)."""
+    points, truth = sample_shape(SHAPE, n, seed=11)
+    return add_gaussian_noise(points, NOISE, seed=12), truth
 OPEN3D = """
 import sys, open3d as o3d
 pcd = o3d.io.read_point_cloud(sys.argv[1])
@@ -82,8 +88,7 @@ def timed(command: list[str]) -> dict[str, float]:
 
 
 def case(n: int, threads: int, folder: Path, float32: bool) -> dict:
-    points, truth = sample_shape(SHAPE, n, seed=11)
-    points = add_gaussian_noise(points, NOISE, seed=12)
+    points, truth = noisy_cloud(n)
     source, ours, reference = folder / "cloud.ply", folder / "ours.ply", folder / "open3d.ply"
     write_ply(source, points)
     ours_float32 = folder / "ours_float32.ply"

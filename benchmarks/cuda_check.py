@@ -19,17 +19,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from bench_cli import NOISE, SHAPE, noisy_cloud
 from machine import machine_info, shipped_networks, write_results
 
 from refinenet.cli.estimate import estimate_normals
-from refinenet.data.noise import add_gaussian_noise
-from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.release import load_release
 
 RESULTS = Path(__file__).parent / "results"
-#: bench_cli's cloud: shape, noise in % of the diagonal, and the seeds of its sampling and noise.
-SHAPE, NOISE, SEEDS = "fandisk_a", 0.1, (11, 12)
 
 
 def run(device: str, points: np.ndarray, truth: np.ndarray, workers: int) -> tuple[dict, np.ndarray]:
@@ -66,8 +63,7 @@ def main() -> None:
     args = parser.parse_args()
     if not torch.cuda.is_available():
         raise SystemExit("error: cuda_check: torch sees no CUDA device")
-    points, truth = sample_shape(SHAPE, args.points, seed=SEEDS[0])
-    points = add_gaussian_noise(points, NOISE, seed=SEEDS[1])
+    points, truth = noisy_cloud(args.points)
     workers = torch.get_num_threads()
     devices, normals = {}, {}
     for device in ("cuda", "cpu"):
