@@ -162,7 +162,7 @@ def report(cases: dict[str, dict]) -> str:
         "",
         "Errors are unoriented angles to the true normals; *outward* is the fraction of our oriented normals on the "
         "outer side (Open3D's are unoriented). A load average above 2 at the start means another job shared the "
-        "cores. *Networks* is the params fingerprint of the shipped release that ran (its model card). The GEMM "
+        "cores. *Networks* names the shipped release that ran (its model card's fingerprint). The GEMM "
         "column is the machine's speed at the time (`gemm_gflops`); the same machine has measured "
         "from about 60 to about 200 GFLOP/s on different days, and the network's time follows it.",
         "",

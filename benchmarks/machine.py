@@ -28,7 +28,7 @@ def machine_info(**extra: Any) -> dict[str, Any]:
 
 
 def shipped_networks(release) -> dict[str, str]:
-    """The release that ran, as its model card names it: profile and params fingerprint."""
+    """The release that ran, as its model card names it: profile and fingerprint (params and training clouds)."""
     return {k: release.card[k] for k in ("profile", "params_fingerprint")}
 
 

@@ -32,6 +32,13 @@ def arguments(parser):
     parser.add_argument("--out", required=True, help="the release folder")
 
 
+def fingerprint(resolved: dict, clouds: list[str]) -> str:
+    """The name of a release: a hash of the resolved params and the training clouds' file names, so that networks
+    trained on another catalogue of shapes under the same params get another name."""
+    named = {"params": resolved, "training_clouds": sorted(Path(c).name for c in clouds)}
+    return hashlib.sha256(json.dumps(named, sort_keys=True).encode()).hexdigest()[:16]
+
+
 def main(params, args):
     resolved = config.resolve(config.read_raw(args.params))
     network = architecture(params.network, params.features, params.patches)
@@ -44,7 +51,7 @@ def main(params, args):
     clouds = [read_cloud(path) for path in args.clouds]
     card = {
         "profile": params.profile,
-        "params_fingerprint": hashlib.sha256(json.dumps(resolved, sort_keys=True).encode()).hexdigest()[:16],
+        "params_fingerprint": fingerprint(resolved, args.clouds),
         "network": asdict(params.network),
         "n_normals": network.n_normals,
         "n_clusters": model.n_clusters,
