@@ -96,7 +96,7 @@ def case(n: int, threads: int, folder: Path, float32: bool) -> dict:
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,
               "machine": machine_info(gemm_gflops_start=gemm_gflops(threads)),
               "precision": resolve_precision("auto", torch.device("cpu")),
-              "networks": json.loads((SHIPPED / CARD_JSON).read_text())["params_fingerprint"],
+              "networks": json.loads((SHIPPED / CARD_JSON).read_text())["fingerprint"],
               "ours": timed([*command, "-o", str(ours)]),
               "ours_float32": timed([*command, "-o", str(ours_float32), "--precision", "float32"]) if float32 else None,
               "open3d": timed([sys.executable, "-c", OPEN3D, str(source), str(reference)])}

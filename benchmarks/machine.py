@@ -29,7 +29,7 @@ def machine_info(**extra: Any) -> dict[str, Any]:
 
 def shipped_networks(release) -> dict[str, str]:
     """The release that ran, as its model card names it: profile and fingerprint (params and training clouds)."""
-    return {k: release.card[k] for k in ("profile", "params_fingerprint")}
+    return {k: release.card[k] for k in ("profile", "fingerprint")}
 
 
 def write_results(out: Path, stem: str, record: dict[str, Any], markdown: str) -> None:

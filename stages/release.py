@@ -51,7 +51,7 @@ def main(params, args):
     clouds = [read_cloud(path) for path in args.clouds]
     card = {
         "profile": params.profile,
-        "params_fingerprint": fingerprint(resolved, args.clouds),
+        "fingerprint": fingerprint(resolved, args.clouds),
         "network": asdict(params.network),
         "n_normals": network.n_normals,
         "n_clusters": model.n_clusters,

@@ -169,7 +169,7 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "# Model card: Refine-Net networks shipped with this package",
         "",
         f"Exported by the pipeline's `release` step from a run of profile **{card['profile']}** "
-        f"(fingerprint of its params and training clouds `{card['params_fingerprint']}`). Retrain and re-export with "
+        f"(fingerprint of its params and training clouds `{card['fingerprint']}`). Retrain and re-export with "
         "`snakemake -j2 release` (or `dvc repro release`); `refinenet info` prints this card.",
         "",
         "## Networks",
