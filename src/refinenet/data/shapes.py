@@ -19,7 +19,6 @@ from functools import cache
 from typing import Any, Protocol
 
 import numpy as np
-from matplotlib.path import Path
 from scipy.spatial import ConvexHull
 
 from refinenet.data.meshes import mesh_area, sample_mesh
@@ -100,6 +99,10 @@ class PlanarRegion:
     """
 
     def __init__(self, loops: Sequence[Array], z: float, up: bool):
+        # Imported here: every stage imports this module through the cloud reader, only the clouds step builds
+        # shapes, and matplotlib adds about 0.1 s to the start-up of each of the pipeline's ~700 jobs.
+        from matplotlib.path import Path
+
         self.paths = [Path(np.vstack([loop, loop[:1]]), closed=True) for loop in loops]
         self.z, self.normal = z, np.array([0.0, 0.0, 1.0 if up else -1.0])
         self.area = sum(_signed_area(loop) for loop in loops)
