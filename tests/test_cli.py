@@ -7,6 +7,7 @@ import json
 import shutil
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -137,7 +138,11 @@ def test_tiled_mfps_equals_the_whole_cloud(release):
     np.testing.assert_array_equal(tiled, whole)
 
 
-def test_tiled_refinenet_equals_the_whole_cloud(release):
+@pytest.mark.parametrize("smooth_jet", [None, 1.5])
+def test_tiled_refinenet_equals_the_whole_cloud(release, smooth_jet):
+    """Also with the smooth-point jet, whose noise a tiled cloud measures on all its points."""
+    features = replace(release.params.features, smooth_jet=smooth_jet)
+    release = replace(release, params=replace(release.params, features=features))
     points = terrain(30_000)
     whole = estimate_normals(points, release, "refinenet")
     tiled = estimate_normals(points, release, "refinenet", tile_points=10_000)

@@ -145,7 +145,7 @@ def test_bad_cache_file_is_an_input_error(tmp_path):
 
 @pytest.mark.parametrize("field, value", [("frame_mode", "random"), ("hmp_size", 6), ("r_f", 0.0),
                                           ("sigma_r", ()), ("heights_dtype", "int8"), ("hmp_extent", -1.0),
-                                          ("pca_k", 2), ("jet_k", 5)])
+                                          ("pca_k", 2), ("jet_k", 5), ("smooth_jet", 0.0)])
 def test_config_errors_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
         feature_config(**{field: value})

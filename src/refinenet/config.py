@@ -209,6 +209,10 @@ class FeatureConfig:
     jet_k: int | None = None
     """Beyond the paper: append the degree-2 jet normal of this many neighbours after it (X + 1): on curved smooth
     surfaces a jet follows the curvature that biases a wide PCA fit. None: no jet normal."""
+    smooth_jet: float | None = None
+    """Beyond the paper: where a degree-2 jet of 100 neighbours fits them within this many times the cloud's noise,
+    its normal replaces the initial normal before anything is computed from it (`estimators.smooth_jet`). None:
+    the initial normals as they are."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
@@ -222,6 +226,8 @@ class FeatureConfig:
         if self.jet_k is not None and self.jet_k < JET_MIN_K:
             raise ValueError(f"jet_k must be at least {JET_MIN_K} (a degree-2 jet has {JET_MIN_K} coefficients) "
                              f"or None, got {self.jet_k}")
+        if self.smooth_jet is not None and not self.smooth_jet > 0:
+            raise ValueError(f"smooth_jet must be positive or None, got {self.smooth_jet}")
         for name in ("sigma_s", "sigma_r"):
             values = getattr(self, name)
             if not values or any(not s > 0 for s in values):

@@ -17,6 +17,7 @@ from refinenet.config import InferenceConfig, Params
 from refinenet.data.noise import bbox_diagonal
 from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
 from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
+from refinenet.estimators.smooth_jet import point_noise
 from refinenet.estimators.strata import consensus, consensus_k, strata, strata_needed
 from refinenet.features.cache import compute_features
 from refinenet.geometry.neighbors import build_tree
@@ -105,6 +106,8 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     layout = list(tiles(points, tile_points, margin))
     del tree
     candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
+    tiled_jet = method == "refinenet" and params.features.smooth_jet is not None and len(layout) > 1
+    noise = _noise(points, layout, progress) if tiled_jet else None
     inference = InferenceConfig(batch_size=params.inference.batch_size, device=device)
     normals = np.empty_like(points)
     inner = progress and len(layout) == 1
@@ -119,7 +122,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
             normals[tile.own] = start[rows]
             continue
         features = compute_features(sub, start, params.features, inner, length=length, centres=rows,
-                                    workers=workers)
+                                    workers=workers, noise=noise)
         normals[tile.own] = refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
                                            inference, progress=inner, length=length)
     return normals
@@ -146,3 +149,11 @@ def _candidacy(points: np.ndarray, layout: list[Tile], params: Params, progress:
     for tile in tqdm(layout, desc="MFPS candidacy", unit="tile", disable=not progress):
         raw[tile.own] = point_variation(points[tile.ids], params.mfps, tile.own_rows)
     return cloud_candidacy(raw, params.mfps)
+
+
+def _noise(points: np.ndarray, layout: list[Tile], progress: bool) -> float:
+    """The whole cloud's noise for `FeatureConfig.smooth_jet`, from the jets of every tile's own points."""
+    residuals = np.empty(len(points))
+    for tile in tqdm(layout, desc="noise", unit="tile", disable=not progress):
+        residuals[tile.own] = point_noise(points[tile.ids], tile.own_rows)
+    return float(np.median(residuals))

@@ -21,6 +21,7 @@ from refinenet.data import io
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
 from refinenet.estimators.baselines import fit_normals
+from refinenet.estimators.smooth_jet import smooth_jet_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames, target_sign
@@ -76,15 +77,17 @@ class Features:
 
 def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig,
                      progress: bool = False, length: float | None = None,
-                     centres: np.ndarray | None = None, workers: int = 1) -> Features:
+                     centres: np.ndarray | None = None, workers: int = 1, noise: float | None = None) -> Features:
     """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part).
 
     `length` is l_d, the unit of r_f and hmp_extent (default: the bounding-box diagonal; `geometry.scale`).
     `centres` limits the rows to those points (a tile's own points; its margin only lends neighbours).
     `workers` threads build the height maps (numpy releases the GIL); each map depends on its point alone, so
-    the result does not depend on it.
+    the result does not depend on it. `noise` is the whole cloud's for a tile (`FeatureConfig.smooth_jet`).
     """
     points = np.asarray(points, dtype=np.float64)
+    if config.smooth_jet is not None:
+        initial_normals = smooth_jet_normals(points, initial_normals, config.smooth_jet, noise)
     length = bbox_diagonal(points) if length is None else length
     rows = np.arange(len(points)) if centres is None else np.asarray(centres)
     nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,

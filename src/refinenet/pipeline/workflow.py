@@ -302,7 +302,7 @@ _STAGE = ("config", "errors", "atomic", "threads", "allocator", "pipeline.stage"
 _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn", "geometry.ball")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
-             "data.noise", "estimators.baselines", "data.shapes", "data.meshes")
+             "data.noise", "estimators.baselines", "estimators.smooth_jet", "data.shapes", "data.meshes")
 _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.devices", "network.training",
             "features.patches", "evaluation.metrics")
 _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", "pipeline.workflow", "estimators.baselines",
@@ -534,8 +534,9 @@ class Pipeline:
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
                 + OUTPUT_CAPTIONS.get(n.output, "") +
                 f"Kc = {reference.clustering.n_clusters}, X = {f.n_normals}"
-                + (f" (the last {wide} normal)" if wide else "") +
-                f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
+                + (f" (the last {wide} normal)" if wide else "")
+                + (f", a K = 100 Jet normal where its residual is < {f.smooth_jet} x the noise" if f.smooth_jet else "")
+                + f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
                 f"batch {t.batch_size}, <= {t.max_epochs} epochs (patience {t.patience}), {t.loss} loss"
                 + (f", at most {t.max_train_points_per_cloud} training points per cloud"
