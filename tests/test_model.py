@@ -17,6 +17,7 @@ from refinenet.network.model import (
     architecture_table,
     count_parameters,
     example_inputs,
+    for_inference,
     fuse_batch_norm,
     preset,
     quaternion_to_matrix,
@@ -268,3 +269,21 @@ def test_runs_on_cuda_under_no_grad():
     assert out.device.type == "cuda"
     reference = model.cpu()(*(t.cpu() for t in inputs))
     torch.testing.assert_close(out.cpu(), reference, rtol=0, atol=5e-3)  # cuDNN convolutions may use TF32
+
+
+@pytest.mark.parametrize("fuse, precision", [(True, "bfloat16"), (True, "float32"), (False, "bfloat16")])
+def test_in_place_preparation_equals_the_copies(fuse, precision):
+    """`for_inference` changes the loaded network itself and computes exactly what the copying forms give."""
+    torch.manual_seed(0)
+    model = RefineNet(preset("release"))
+    for seed in range(3):  # non-trivial BN statistics
+        model(*_inputs(model.config, 16, seed=seed))
+    model.eval()
+    copied = reduced_precision(fuse_batch_norm(model) if fuse else model, precision)
+    in_place = for_inference(model, fuse, precision)
+    assert in_place is model
+    inputs = _inputs(model.config, 8)
+    with torch.no_grad():
+        torch.testing.assert_close(in_place(*inputs), copied(*inputs), rtol=0, atol=0)
+    with pytest.raises(ValueError, match="precision 'float16'"):
+        for_inference(RefineNet(preset("release")), True, "float16")

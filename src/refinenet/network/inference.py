@@ -20,7 +20,7 @@ from refinenet.geometry.frames import to_world
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.dataset import make_inputs, prepare
 from refinenet.network.devices import resolve_device, resolve_precision
-from refinenet.network.model import NetworkConfig, RefineNet, fuse_batch_norm, reduced_precision
+from refinenet.network.model import NetworkConfig, RefineNet, for_inference
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
 
 
@@ -81,6 +81,5 @@ def load_networks(folders: Sequence[str | Path], network: NetworkConfig, device:
             raise InputError(best, f"was trained with another architecture: {saved['network']}")
         net = RefineNet(network)
         net.load_state_dict(saved["model"])
-        net = net.to(device).eval()
-        networks[c] = reduced_precision(fuse_batch_norm(net) if fuse else net, precision)
+        networks[c] = for_inference(net.to(device), fuse, precision)
     return networks

@@ -442,13 +442,16 @@ def fuse_batch_norm(model: RefineNet) -> RefineNet:
     BN passes over the large per-point activations makes CPU inference 1.3-1.8x faster
     (benchmarks/results/inference.md). The copy must not be trained: its BN statistics are frozen in.
     """
-    fused = copy.deepcopy(model).eval()
-    for seq in fused.modules():
+    return _fold_batch_norm(copy.deepcopy(model).eval())
+
+
+def _fold_batch_norm(model: RefineNet) -> RefineNet:
+    for seq in model.modules():
         if isinstance(seq, nn.Sequential):
             for i in range(len(seq) - 1):
                 if isinstance(seq[i], nn.Linear) and isinstance(seq[i + 1], nn.BatchNorm1d):
                     seq[i], seq[i + 1] = fuse_linear_bn_eval(seq[i], seq[i + 1]), nn.Identity()
-    return fused
+    return model
 
 
 #: Inference precisions of the feature modules' convolutional parts (`reduced_precision`).
@@ -465,18 +468,34 @@ def reduced_precision(model: RefineNet, precision: str) -> RefineNet:
     and the mean error by about 0.001 deg (benchmarks/results/cli.md). The connection and output modules, where
     bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
     """
+    _check_precision(precision)
+    return model if precision == "float32" else _set_precision(copy.deepcopy(model).eval(), precision)
+
+
+def for_inference(model: RefineNet, fuse: bool, precision: str) -> RefineNet:
+    """`model` itself, a network its caller has just loaded and owns, made ready for inference in place: eval mode,
+    BN folded where `fuse` (`fuse_batch_norm`), the feature modules in `precision` (`reduced_precision`). The
+    copying forms deep-copy the network each time, which every inference job paid for every network."""
+    _check_precision(precision)
+    model.eval()
+    if fuse:
+        _fold_batch_norm(model)
+    return model if precision == "float32" else _set_precision(model, precision)
+
+
+def _check_precision(precision: str) -> None:
     if precision not in PRECISIONS:
         raise ValueError(f"precision '{precision}' is not one of {tuple(PRECISIONS)}")
-    if precision == "float32":
-        return model
-    reduced = copy.deepcopy(model).eval()
+
+
+def _set_precision(model: RefineNet, precision: str) -> RefineNet:
     dtype = PRECISIONS[precision]
-    if reduced.point_module is not None:
-        reduced.point_module.mlp.to(dtype)
-    if reduced.height_map_module is not None:
-        for layer in list(reduced.height_map_module)[:reduced.height_map_module.n_convolutional]:
+    if model.point_module is not None:
+        model.point_module.mlp.to(dtype)
+    if model.height_map_module is not None:
+        for layer in list(model.height_map_module)[:model.height_map_module.n_convolutional]:
             layer.to(dtype)
-    return reduced
+    return model
 
 
 def _shape(t: Tensor | None) -> tuple[int, ...] | None:

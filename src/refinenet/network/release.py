@@ -25,7 +25,7 @@ from refinenet.features.cache import Features
 from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.inference import refine_normals
-from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, fuse_batch_norm, reduced_precision
+from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, for_inference
 from refinenet.network.training import network_fingerprint
 
 #: Where the package keeps its shipped release (the pipeline's `release` step writes it).
@@ -126,8 +126,7 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
     for c, state in bundle["networks"].items() if with_networks else ():
         net = RefineNet(network)
         net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
-        net = net.to(device).eval()
-        networks[int(c)] = reduced_precision(fuse_batch_norm(net) if fuse else net, precision)
+        networks[int(c)] = for_inference(net.to(device), fuse, precision)
     return Release(params, cluster_model, networks, card)
 
 
