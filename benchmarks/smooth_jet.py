@@ -34,7 +34,7 @@ from refinenet.data.io import load_record, read_normals
 from refinenet.estimators.smooth_jet import JET_K, NOISE_K, jet_and_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.evaluation.table import category_order
-from refinenet.pipeline.workflow import CLOUD, NORMALS, REFINED
+from refinenet.pipeline.workflow import NORMALS, REFINED
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results"
@@ -43,9 +43,9 @@ RATIOS = (1.0, 1.25, 1.5, 1.75, 2.0, 2.5)
 TABLE_ROWS = ("PCA", "Jet", "MFPS", "Refine-Net")
 
 
-def input_errors(run: Path, split: str) -> tuple[dict[str, dict[str, float]], dict[str, list[dict]]]:
+def input_errors(run: Path, split: str, fits: dict[str, tuple]) -> tuple[dict[str, dict[str, float]], list[dict]]:
     """Mean error per input and category (mean of the clouds' means, as the tables average) on one split's clouds,
-    and the per-cloud rows."""
+    and the per-cloud rows; each cloud's (truth, jet normals, residuals, noise) go into `fits` by cloud key."""
     errors: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
     rows = []
     for path in sorted((run / "results" / "clouds" / split).glob("*/*.npz")):
@@ -54,6 +54,7 @@ def input_errors(run: Path, split: str) -> tuple[dict[str, dict[str, float]], di
         points, truth = arrays["points"].astype(np.float64), arrays["normals"]
         mfps = np.load(run / NORMALS.format(method="mfps", cloud=f"{split}/{category}/{name}"))
         jet, residuals, noise = jet_and_noise(points)
+        fits[f"{split}/{category}/{name}"] = truth, jet, residuals, noise
         inputs = {"MFPS": mfps, f"Jet K = {JET_K}": jet}
         for ratio in RATIOS:
             inputs[f"smooth_jet = {ratio}"] = np.where((residuals < ratio * noise)[:, None], jet, mfps)
@@ -70,24 +71,20 @@ def input_errors(run: Path, split: str) -> tuple[dict[str, dict[str, float]], di
     return table, rows
 
 
-def retrained(run: Path, before: Path) -> dict:
+def retrained(run: Path, before: Path, ratio: float, fits: dict[str, tuple]) -> dict:
     """The run's synthetic tables (mean and PGP) beside those in the folder `before`; per category the share of test
-    points the jet took, with Refine-Net's and the input's error there; SmoothSurface's clouds."""
-    params = params_lib.load(run / "params.yaml")
-    ratio = params.features.smooth_jet
-    if ratio is None:
-        raise SystemExit(f"{run}/params.yaml: features.smooth_jet is not set in profile {params.profile}")
+    points the jet took at `ratio` (the run's), with Refine-Net's and the input's error there (`fits` from
+    `input_errors`); SmoothSurface's clouds."""
     after_table, before_table = (
         pd.concat([pd.read_csv(folder / f"table_synthetic{suffix}.csv", index_col="method")
                    for suffix in ("", "_pgp")], axis=1) for folder in (run / "reports", before))
     share: dict[str, list[float]] = defaultdict(list)
     on_jet: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
-    for path in sorted((run / "results" / "clouds" / "test").glob("*/*.npz")):
-        category, key = path.parent.name, f"test/{path.parent.name}/{path.stem}"
-        arrays, _ = load_record(run / CLOUD.format(cloud=key), ("points", "normals"), "cloud")
-        points, truth = arrays["points"].astype(np.float64), arrays["normals"]
-        refined = read_normals(run / REFINED.format(variant="full", cloud=key), len(points))
-        jet, residuals, noise = jet_and_noise(points)
+    for key, (truth, jet, residuals, noise) in fits.items():
+        if not key.startswith("test/"):
+            continue
+        category = key.split("/")[1]
+        refined = read_normals(run / REFINED.format(variant="full", cloud=key), len(truth))
         took = residuals < ratio * noise
         share[category].append(float(took.mean()))
         if took.any():
@@ -102,7 +99,7 @@ def retrained(run: Path, before: Path) -> dict:
               .set_index("cloud")["mean"].to_dict() for (name, method), label in labels.items()}
     return {
         "smooth_per_cloud": smooth,
-        "ratio": ratio, "profile": params.profile,
+        "ratio": ratio,
         "before": before_table.loc[list(TABLE_ROWS)].to_dict(orient="index"),
         "after": after_table.loc[list(TABLE_ROWS)].to_dict(orient="index"),
         "share": {c: float(np.mean(share[c])) for c in order},
@@ -158,7 +155,7 @@ def markdown(record: dict) -> str:
         rows = {f"{m} (committed)": r["before"][m] for m in TABLE_ROWS}
         rows[f"Refine-Net, smooth_jet = {r['ratio']}"] = r["after"]["Refine-Net"]
         lines += ["## 2. Retrained", "",
-                  f"The synthetic table of the run (profile `{r['profile']}` with smooth_jet = {r['ratio']}; PCA, "
+                  f"The synthetic table of the run (profile `{record['profile']}` with smooth_jet = {r['ratio']}; PCA, "
                   "Jet and MFPS rows are the same clouds' and equal to the committed ones) beside the committed "
                   "table: mean error.", "",
                   "| method | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
@@ -188,15 +185,16 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args()
     start = time.perf_counter()
-    inputs, rows = {}, []
+    params = params_lib.load(args.run / "params.yaml")
+    inputs, rows, fits = {}, [], {}
     for split in ("train", "test"):
-        inputs[split], split_rows = input_errors(args.run, split)
+        inputs[split], split_rows = input_errors(args.run, split, fits)
         rows += split_rows
     chosen = min(RATIOS, key=lambda r: inputs["train"][f"smooth_jet = {r}"]["Average"])
-    record = {"run": str(args.run), "profile": params_lib.load(args.run / "params.yaml").profile,
-              "chosen_ratio": chosen, "inputs": inputs, "clouds": rows}
-    if params_lib.load(args.run / "params.yaml").features.smooth_jet is not None:
-        record["retrained"] = retrained(args.run, args.before)
+    record = {"run": str(args.run), "profile": params.profile, "chosen_ratio": chosen, "inputs": inputs,
+              "clouds": rows}
+    if params.features.smooth_jet is not None:
+        record["retrained"] = retrained(args.run, args.before, params.features.smooth_jet, fits)
     record.update(wall_s=time.perf_counter() - start, machine=machine_info())
     write_results(args.out, "smooth_jet", record, markdown(record))
     print(markdown(record))
