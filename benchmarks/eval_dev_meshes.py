@@ -20,12 +20,18 @@ protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-wei
 degrees away.
 
     python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2] [--methods refinenet]
+                                         [--release FOLDER --stem NAME]
 
 `--methods` reruns only some methods (after a change to Refine-Net, say) and keeps the other methods' rows from
 the committed run (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh and the level.
 
-Writes benchmarks/results/dev_meshes.json and dev_meshes.md. Wall and CPU seconds are recorded for every run (one
-run each), with the load average at start and end.
+`--release` evaluates another run's exported networks (its `src/refinenet/shipped` after `snakemake -j2 release`,
+e.g. a candidate setting's) in place of the shipped ones; `--stem` names the results apart.
+
+Writes benchmarks/results/dev_meshes.json and dev_meshes.md (or `--stem`). Wall and CPU seconds are recorded for
+every run (one run each), with the load average at start and end. Each finished cloud's rows are appended to
+STEM.partial.jsonl beside them, so that a killed run (the whole takes hours on 2 cores) resumes where it stopped when
+started again with the same settings; the file is removed once the results are written.
 """
 
 from __future__ import annotations
@@ -52,12 +58,14 @@ from refinenet.estimators.mfps import mfps_normals
 from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
 from refinenet.evaluation.table import METHOD_NAMES, aggregate, stats_row, to_csv_frame
 from refinenet.network.devices import resolve_device, resolve_precision
-from refinenet.network.release import load_release
+from refinenet.network.release import SHIPPED, load_release
 
 #: params.yaml as written (no profile): the paper's synthetic settings of the baselines, MFPS and the noise.
 PARAMS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False)
 
 RESULTS = Path(__file__).parent / "results"
+#: FeatureConfig's inputs beyond the paper, named in the report when a release uses them.
+BEYOND_PAPER_INPUTS = ("pca_k", "jet_k", "smooth_jet")
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "meshes" / "dev"
 #: Development mesh folder -> the synthetic category whose noise levels it gets (every mesh also gets BigNoise's).
 FOLDERS = {"sharp": "SharpFeature", "smooth": "SmoothSurface", "rich": "RichFeature"}
@@ -134,6 +142,29 @@ def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: 
     return rows
 
 
+def finished_clouds(path: Path, settings: dict) -> dict[tuple, list[dict]]:
+    """The rows of every cloud that an interrupted run with the same `settings` finished (`path`, one JSON line per
+    cloud; a line cut off by the kill is ignored)."""
+    done = {}
+    for line in path.read_text().splitlines() if path.is_file() else ():
+        try:
+            entry = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if entry["settings"] == settings:
+            done[tuple(entry["cloud"])] = entry["rows"]
+    return done
+
+
+def keep_finished(path: Path, settings: dict, cloud: tuple, rows: list[dict]) -> None:
+    """Append one finished cloud's rows to `path`, on disk before the next cloud starts."""
+    with path.open("a") as file:
+        file.write(json.dumps({"settings": settings, "cloud": cloud, "rows": rows},
+                              default=lambda value: value.item()) + "\n")
+        file.flush()
+        os.fsync(file.fileno())
+
+
 def table_categories(table: pd.DataFrame) -> list[str]:
     """The categories of a category table (`aggregate`), in its column order, without the Average."""
     return [c for c in dict.fromkeys(table.columns.get_level_values(0)) if c != "Average"]
@@ -189,14 +220,17 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         + "; ".join(f"the {folder} meshes at {category}'s levels {', '.join(map(str, levels[category]))}"
                     for folder, category in FOLDERS.items())
         + f"; and every mesh at {BIG_NOISE}'s levels {', '.join(map(str, levels[BIG_NOISE]))}. Seeds from "
-        f"`derive_seed({GLOBAL_SEED}, ...)` (in dev_meshes.json). PCA: k = {', '.join(map(str, PCA_KS))} and per "
+        f"`derive_seed({GLOBAL_SEED}, ...)` (in {record['stem']}.json). PCA: k = {', '.join(map(str, PCA_KS))} and per "
         "category the k of lowest mean error (chosen: "
         + ", ".join(f"{c} {k}" for c, k in record["pca_best_k"].items())
         + f"); Jet: k = {PARAMS.baselines.jet_k} ({PARAMS.baselines.big_noise_k} on BigNoise), degree "
         f"{PARAMS.baselines.jet_degree}; MFPS: params.yaml's (K = {{{', '.join(map(str, PARAMS.mfps.scales))}}}, "
         f"R = {PARAMS.mfps.trials}, theta_t = {PARAMS.mfps.theta_t} deg, eta = {PARAMS.mfps.eta}); Refine-Net: "
-        f"the networks shipped with the package (profile {record['release']['profile']}, networks "
-        f"{record['release']['fingerprint']}, trained on the procedural shapes only, {record['precision']}), "
+        + ("the networks shipped with the package" if record["release_shipped"] else
+           "another run's exported networks (`--release`; not the shipped ones)")
+        + f" (profile {record['release']['profile']}, networks {record['release']['fingerprint']}, inputs beyond "
+        f"the paper: {', '.join(f'{k} = {v}' for k, v in record['release_inputs'].items()) or 'none'}, trained on "
+        f"the procedural shapes only, {record['precision']}), "
         "run as `refinenet normals` runs them (`--strata auto`: on strata of a cloud noisier than the networks know, "
         "`benchmarks/results/strata.md`). Errors are unoriented angles in degrees. Generated by "
         "`benchmarks/eval_dev_meshes.py`"
@@ -226,7 +260,7 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         "## Per cloud",
         "",
         "Mean error in degrees per test cloud and method (every statistic, and each run's wall and CPU seconds, "
-        "in dev_meshes.json).",
+        f"in {record['stem']}.json).",
         "",
     ]
     wide = per_cloud.pivot_table(index=["category", "mesh", "noise"], columns="method", values="mean", sort=False)
@@ -289,15 +323,29 @@ def main() -> None:
     parser.add_argument("--reuse", type=Path, default=RESULTS / "dev_meshes.json",
                         help="an earlier run's dev_meshes.json whose rows of the methods not run are kept (the same "
                              "clouds: checked by their seeds and sizes)")
+    parser.add_argument("--release", type=Path, default=SHIPPED,
+                        help="a release folder to evaluate in place of the shipped networks")
+    parser.add_argument("--stem", default="dev_meshes", help="results are written to STEM.json and STEM.md")
     args = parser.parse_args()
     meshes = dev_meshes(args.meshes)
     precision = resolve_precision("auto", resolve_device("cpu"))
-    release = load_release(precision=precision)
+    release = load_release(args.release, precision=precision)
     kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], args.points)
     load_start, start = os.getloadavg()[0], time.perf_counter()
-    rows = [row for category, key, path, noise in clouds(meshes)
-            for row in evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
-                                      tuple(args.methods))]
+    args.out.mkdir(parents=True, exist_ok=True)
+    partial = args.out / f"{args.stem}.partial.jsonl"
+    settings = {"points": args.points, "threads": args.threads, "methods": list(args.methods),
+                "precision": precision, "release": shipped_networks(release)["fingerprint"]}
+    finished = finished_clouds(partial, settings)
+    resumed = sum((category, key, noise) in finished for category, key, _, noise in clouds(meshes))
+    rows = []
+    for category, key, path, noise in clouds(meshes):
+        cloud = (category, key, noise)
+        if cloud not in finished:
+            finished[cloud] = evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
+                                             tuple(args.methods))
+            keep_finished(partial, settings, cloud, finished[cloud])
+        rows += finished[cloud]
     per_cloud = in_run_order(pd.DataFrame(rows), kept)
     if len(per_cloud) != len(clouds(meshes)) * len(METHODS):
         raise SystemExit(f"{args.reuse}: its rows do not cover every cloud of the methods not run")
@@ -321,11 +369,17 @@ def main() -> None:
                              "mean": near_edge_means(per_cloud, "SharpFeature")},
         "per_cloud": json.loads(per_cloud.to_json(orient="records")),
         "release": shipped_networks(release),
+        "stem": args.stem,
+        "release_shipped": args.release.resolve() == SHIPPED,
+        "release_folder": str(args.release),
+        "release_inputs": {k: v for k in BEYOND_PAPER_INPUTS if (v := getattr(release.params.features, k))},
+        "clouds_resumed": resumed,
         "wall_s": time.perf_counter() - start,
         "load_average_1min": [load_start, os.getloadavg()[0]],
         "machine": machine(args.threads),
     }
-    write_results(args.out, "dev_meshes", record, markdown(record, per_cloud, category_table))
+    write_results(args.out, args.stem, record, markdown(record, per_cloud, category_table))
+    partial.unlink()
     print(to_csv_frame(category_table, NAMES).round(3).to_string())
 
 
