@@ -13,9 +13,10 @@ cloud's noise (the median residual of K = 20 jets), before features are computed
    committed ones (`reports/`, or `--before`), with the share of points the jet took per category and Refine-Net's
    error on them against the input's, and SmoothSurface per cloud.
 
-    python benchmarks/smooth_jet.py [--run DIR] [--before CSV]
+    python benchmarks/smooth_jet.py [--run DIR] [--before CSV] [--stem NAME]
 
-Writes benchmarks/results/smooth_jet.json and smooth_jet.md.
+The run's Refine-Net is labelled by its smooth_jet ratio, and by its training noise levels and points per cloud
+where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or `--stem`).
 """
 
 from __future__ import annotations
@@ -71,10 +72,10 @@ def input_errors(run: Path, split: str, fits: dict[str, tuple]) -> tuple[dict[st
     return table, rows
 
 
-def retrained(run: Path, before: Path, ratio: float, fits: dict[str, tuple]) -> dict:
+def retrained(run: Path, before: Path, ratio: float, label: str, fits: dict[str, tuple]) -> dict:
     """The run's synthetic tables (mean and PGP) beside those in the folder `before`; per category the share of test
     points the jet took at `ratio` (the run's), with Refine-Net's and the input's error there (`fits` from
-    `input_errors`); SmoothSurface's clouds."""
+    `input_errors`); SmoothSurface's clouds. `label` names the run's Refine-Net."""
     after_table, before_table = (
         pd.concat([pd.read_csv(folder / f"table_synthetic{suffix}.csv", index_col="method")
                    for suffix in ("", "_pgp")], axis=1) for folder in (run / "reports", before))
@@ -94,17 +95,30 @@ def retrained(run: Path, before: Path, ratio: float, fits: dict[str, tuple]) -> 
     per_cloud = {name: pd.read_csv(folder / "per_cloud" / "table_synthetic.csv")
                  for name, folder in (("before", before), ("after", run / "reports"))}
     labels = {("before", "refinenet"): "Refine-Net (committed)", ("after", "jet"): "Jet",
-              ("after", "refinenet"): f"Refine-Net, smooth_jet = {ratio}"}
+              ("after", "refinenet"): f"Refine-Net, {label}"}
     smooth = {label: per_cloud[name].query("method == @method and category == 'SmoothSurface'")
               .set_index("cloud")["mean"].to_dict() for (name, method), label in labels.items()}
     return {
         "smooth_per_cloud": smooth,
         "ratio": ratio,
+        "label": label,
         "before": before_table.loc[list(TABLE_ROWS)].to_dict(orient="index"),
         "after": after_table.loc[list(TABLE_ROWS)].to_dict(orient="index"),
         "share": {c: float(np.mean(share[c])) for c in order},
         "on_jet": {m: {c: float(np.mean(per[c])) for c in order if per[c]} for m, per in on_jet.items()},
     }
+
+
+def run_label(params: params_lib.Params) -> str:
+    """The run's settings that set its Refine-Net apart: the ratio, and the training noise levels and points per
+    cloud where they differ from this checkout's profile's."""
+    ours = params_lib.load(ROOT / "params.yaml")
+    label = f"smooth_jet = {params.features.smooth_jet}"
+    if params.noise.train != ours.noise.train:
+        label += ", training noise " + ", ".join(f"{level:g}" for level in params.noise.train) + "%"
+    if params.training.max_train_points_per_cloud != ours.training.max_train_points_per_cloud:
+        label += f", {params.training.max_train_points_per_cloud} training points per cloud and cluster"
+    return label
 
 
 def findings(r: dict) -> list[str]:
@@ -121,7 +135,7 @@ def findings(r: dict) -> list[str]:
         "category " + ", ".join(f"{c.split('/')[0]} {old[c]:.2f} -> {new[c]:.2f}" for c in new
                                 if c.endswith("/mean") and not c.startswith("Average")) + ".",
         "- SmoothSurface clouds where Refine-Net is below Jet: " + ", ".join(
-            c for c, v in r["smooth_per_cloud"][f"Refine-Net, smooth_jet = {r['ratio']}"].items()
+            c for c, v in r["smooth_per_cloud"][f"Refine-Net, {r['label']}"].items()
             if v < r["smooth_per_cloud"]["Jet"][c]) + ".",
         "- PGP10 " + ("above MFPS's in every category." if not below_mfps else
                       f"not above MFPS's in {', '.join(below_mfps)} (" + ", ".join(
@@ -153,9 +167,9 @@ def markdown(record: dict) -> str:
         columns = [c for c in next(iter(r["after"].values())) if c.endswith("/mean")]
         names = [c.split("/")[0] for c in columns]
         rows = {f"{m} (committed)": r["before"][m] for m in TABLE_ROWS}
-        rows[f"Refine-Net, smooth_jet = {r['ratio']}"] = r["after"]["Refine-Net"]
+        rows[f"Refine-Net, {r['label']}"] = r["after"]["Refine-Net"]
         lines += ["## 2. Retrained", "",
-                  f"The synthetic table of the run (profile `{record['profile']}` with smooth_jet = {r['ratio']}; PCA, "
+                  f"The synthetic table of the run (profile `{record['profile']}` with {r['label']}; PCA, "
                   "Jet and MFPS rows are the same clouds' and equal to the committed ones) beside the committed "
                   "table: mean error.", "",
                   "| method | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
@@ -183,6 +197,7 @@ def main() -> None:
     parser.add_argument("--before", type=Path, default=ROOT / "reports",
                         help="the folder of the synthetic tables (mean and PGP) the run is compared with")
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--stem", default="smooth_jet", help="results are written to STEM.json and STEM.md")
     args = parser.parse_args()
     start = time.perf_counter()
     params = params_lib.load(args.run / "params.yaml")
@@ -194,9 +209,9 @@ def main() -> None:
     record = {"run": str(args.run), "profile": params.profile, "chosen_ratio": chosen, "inputs": inputs,
               "clouds": rows}
     if params.features.smooth_jet is not None:
-        record["retrained"] = retrained(args.run, args.before, params.features.smooth_jet, fits)
+        record["retrained"] = retrained(args.run, args.before, params.features.smooth_jet, run_label(params), fits)
     record.update(wall_s=time.perf_counter() - start, machine=machine_info())
-    write_results(args.out, "smooth_jet", record, markdown(record))
+    write_results(args.out, args.stem, record, markdown(record))
     print(markdown(record))
 
 
