@@ -157,10 +157,11 @@ def finished_clouds(path: Path, settings: dict) -> dict[tuple, list[dict]]:
 
 
 def keep_finished(path: Path, settings: dict, cloud: tuple, rows: list[dict]) -> None:
-    """Append one finished cloud's rows to `path`, on disk before the next cloud starts."""
+    """Append one finished cloud's rows to `path`, on disk before the next cloud starts. Each entry starts on a
+    line of its own, also after a line that a kill cut off."""
     with path.open("a") as file:
-        file.write(json.dumps({"settings": settings, "cloud": cloud, "rows": rows},
-                              default=lambda value: value.item()) + "\n")
+        file.write("\n" + json.dumps({"settings": settings, "cloud": cloud, "rows": rows},
+                                     default=lambda value: value.item()) + "\n")
         file.flush()
         os.fsync(file.fileno())
 
