@@ -16,7 +16,8 @@ cloud's noise (the median residual of K = 20 jets), before features are computed
     python benchmarks/smooth_jet.py [--run DIR] [--before CSV] [--stem NAME]
 
 The run's Refine-Net is labelled by its smooth_jet ratio, and by its training noise levels and points per cloud
-where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or `--stem`).
+where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or
+`--stem`).
 """
 
 from __future__ import annotations
