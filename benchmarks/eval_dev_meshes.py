@@ -328,7 +328,7 @@ def main() -> None:
                         help="a release folder to evaluate in place of the shipped networks")
     parser.add_argument("--stem", default="dev_meshes", help="results are written to STEM.json and STEM.md")
     args = parser.parse_args()
-    meshes = dev_meshes(args.meshes)
+    test_clouds = clouds(dev_meshes(args.meshes))
     precision = resolve_precision("auto", resolve_device("cpu"))
     release = load_release(args.release, precision=precision)
     kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], args.points)
@@ -338,17 +338,17 @@ def main() -> None:
     settings = {"points": args.points, "threads": args.threads, "methods": list(args.methods),
                 "precision": precision, "release": shipped_networks(release)["fingerprint"]}
     finished = finished_clouds(partial, settings)
-    resumed = sum((category, key, noise) in finished for category, key, _, noise in clouds(meshes))
-    rows = []
-    for category, key, path, noise in clouds(meshes):
+    rows, resumed = [], 0
+    for category, key, path, noise in test_clouds:
         cloud = (category, key, noise)
+        resumed += cloud in finished
         if cloud not in finished:
             finished[cloud] = evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
                                              tuple(args.methods))
             keep_finished(partial, settings, cloud, finished[cloud])
         rows += finished[cloud]
     per_cloud = in_run_order(pd.DataFrame(rows), kept)
-    if len(per_cloud) != len(clouds(meshes)) * len(METHODS):
+    if len(per_cloud) != len(test_clouds) * len(METHODS):
         raise SystemExit(f"{args.reuse}: its rows do not cover every cloud of the methods not run")
     category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
     sharp = category_table[("SharpFeature", "mean")]
