@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results"
 CATEGORY = "SmoothSurface"
 KS = (50, 70, 100, 200)
+SPLITS = ("test", "train")
 
 
 def cloud_errors(points: np.ndarray, truth: np.ndarray) -> dict[str, np.ndarray]:
@@ -99,12 +100,14 @@ def main() -> None:
     parser.add_argument("--stem", default="jet_scales")
     args = parser.parse_args()
     profile = params_lib.load(args.run / "params.yaml").profile
+    for split in SPLITS:
+        folder = args.run / "results" / "clouds" / split / CATEGORY
+        if not any(folder.glob("*.npz")):
+            parser.error(f"{folder}: no clouds (run the pipeline first)")
     start = time.perf_counter()
     pooled, per_cloud = {}, {}
-    for split in ("test", "train"):
+    for split in SPLITS:
         pooled[split], per_cloud[split] = split_errors(args.run, split)
-        if not per_cloud[split]:
-            parser.error(f"{args.run / 'results' / 'clouds' / split / CATEGORY}: no clouds (run the pipeline first)")
     record = {"run": str(args.run), "profile": profile, "pooled": pooled, "per_cloud": per_cloud,
               "wall_s": time.perf_counter() - start, "machine": machine_info()}
     write_results(args.out, args.stem, record, markdown(record))
