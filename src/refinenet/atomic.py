@@ -50,3 +50,12 @@ def write_text(path: str | Path, text: str) -> None:
     """Write a text file atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text)
+
+
+def write_torch(path: str | Path, obj: object) -> None:
+    """Save a torch object atomically, through an open file: given a path, torch names the records inside its
+    archive after that (temporary, random) file name, so two runs saving the same networks wrote different bytes."""
+    import torch  # here, not at the top: most users of this module never load torch
+
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        torch.save(obj, fh)

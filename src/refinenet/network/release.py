@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from refinenet.atomic import atomic_path, write_text
+from refinenet.atomic import write_text, write_torch
 from refinenet.config import InferenceConfig, Params, PatchConfig
 from refinenet.errors import InputError
 from refinenet.evaluation.metrics import unoriented_angles
@@ -87,8 +87,7 @@ def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterM
                           for name in ("mean", "components", "centres")},
         "networks": {str(c): half(state) for c, state in states.items()},
     }
-    with atomic_path(folder / BUNDLE) as tmp:
-        torch.save(bundle, tmp)
+    write_torch(folder / BUNDLE, bundle)
     write_text(folder / CARD_JSON, json.dumps(card, indent=2, sort_keys=True) + "\n")
     write_text(folder / CARD_MD, model_card_markdown(card))
 

@@ -36,7 +36,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from refinenet.atomic import atomic_path, write_text
+from refinenet.atomic import atomic_path, write_text, write_torch
 from refinenet.config import LOSSES as LOSS_NAMES
 from refinenet.config import PatchConfig, TrainConfig
 from refinenet.evaluation.metrics import unoriented_angles
@@ -190,14 +190,12 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
                "val_rmse_deg": float(np.sqrt(np.mean(angles ** 2))), "seconds": time.perf_counter() - start}
         if row["val_rmse_deg"] < state["best_val_rmse_deg"]:
             state["best_epoch"], state["best_val_rmse_deg"] = epoch, row["val_rmse_deg"]
-            with atomic_path(best) as tmp:
-                torch.save({"model": model.state_dict(), "network": network_fingerprint(network), "epoch": epoch,
-                            "val_rmse_deg": row["val_rmse_deg"]}, tmp)
+            write_torch(best, {"model": model.state_dict(), "network": network_fingerprint(network), "epoch": epoch,
+                               "val_rmse_deg": row["val_rmse_deg"]})
         state["epoch"] = epoch
         state["history"] = [*state["history"], row]
-        with atomic_path(checkpoint) as tmp:
-            torch.save({**state, "fingerprint": fingerprint, "model": model.state_dict(),
-                        "optimizer": optimizer.state_dict()}, tmp)
+        write_torch(checkpoint, {**state, "fingerprint": fingerprint, "model": model.state_dict(),
+                                 "optimizer": optimizer.state_dict()})
         _write_history(history, state["history"])
         if progress:
             tqdm.write(f"cluster {data.cluster} epoch {epoch}: train loss {train_loss:.5f}, "
