@@ -6,8 +6,8 @@
 * `record`: after a plain Snakemake run, write every finished, up-to-date step into dvc.lock
   (`dvc commit --force`, with one write of dvc.lock), so `dvc repro` has nothing to redo. The Snakefile calls it
   on success. One `snakemake --summary` tells which steps are up to date.
-* `sync`: after `dvc checkout`/`dvc pull`/`git checkout`, when `dvc status` is clean, mark the restored
-  files up to date for Snakemake (`snakemake --touch`).
+* `sync [STEP ...]`: after `dvc checkout`/`dvc pull`/`git checkout`, when `dvc status` is clean (for the named
+  steps), mark the restored files up to date for Snakemake (`snakemake --touch`).
 """
 
 from __future__ import annotations
@@ -118,12 +118,20 @@ def commit(names: list[str]) -> None:
         chosen[0].dvcfile.dump_stages(chosen, update_pipeline=False)
 
 
-def sync() -> int:
-    status = subprocess.run(["dvc", "status", "--json"], capture_output=True, text=True, check=True)
+def sync(names: list[str]) -> int:
+    """Mark the named steps' outputs (every step's when none is named) and what they are made from up to date for
+    Snakemake, once DVC has them all: a run that built only some stages (`dvc repro` of the main job) and was
+    pulled elsewhere syncs those."""
+    steps = pipeline().steps
+    unknown = [name for name in names if name not in steps]
+    if unknown:
+        print(f"error: sync: no step named {', '.join(unknown)}", file=sys.stderr)
+        return 2
+    status = subprocess.run(["dvc", "status", "--json", *names], capture_output=True, text=True, check=True)
     if json.loads(status.stdout or "{}"):
         print("sync: `dvc status` is not clean; run `dvc checkout` or `dvc repro` first", file=sys.stderr)
         return 1
-    targets = [t for step in pipeline().steps.values() for t in step.targets()]
+    targets = [t for name in (names or steps) for t in steps[name].targets()]
     return subprocess.run([*SNAKEMAKE, "--touch", "--cores", "1", "--", *targets], env=_env()).returncode
 
 
@@ -134,12 +142,13 @@ def main(argv: list[str] | None = None) -> int:
     run_p.add_argument("step", help="a step's name: its dvc.yaml stage")
     run_p.add_argument("--cores", default=os.environ.get("REFINENET_CORES", "all"))
     sub.add_parser("record", help="record finished Snakemake steps in dvc.lock")
-    sub.add_parser("sync", help="mark DVC-restored outputs up to date for Snakemake")
+    sync_p = sub.add_parser("sync", help="mark DVC-restored outputs up to date for Snakemake")
+    sync_p.add_argument("steps", nargs="*", help="only these steps (dvc.yaml stages) and their inputs")
     args = parser.parse_args(argv)
     try:
         if args.command == "run":
             return run(args.step, args.cores)
-        return record() if args.command == "record" else sync()
+        return record() if args.command == "record" else sync(args.steps)
     except RefineNetError as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
