@@ -105,7 +105,7 @@ def test_snakemake_builds_every_report(by_snakemake):
 
 def declared_files(repo: Path, steps: tuple[str, ...]) -> list[Path]:
     """Every file of the named steps' declared outputs (folders walked), relative to the copy."""
-    outs = [repo / out for name in steps for step in [PIPELINE.steps[name]] for out in (*step.outs, *step.metrics)]
+    outs = [repo / out for step in map(PIPELINE.steps.get, steps) for out in (*step.outs, *step.metrics)]
     return sorted(f.relative_to(repo) for out in outs for f in ([out] if out.is_file() else out.rglob("*"))
                   if f.is_file())
 
@@ -189,7 +189,8 @@ NORMALS_FIGURE = {"fig_normals"} | REAL
 REPORT = {"report"}
 #: What the DVC run builds: the main job and the L1/L2 ablation's table, whose variants train networks of their own.
 BY_DVC = (*MAIN, "table_loss")
-BY_DVC_TARGETS = ["main", *PIPELINE.steps["table_loss"].targets()]
+#: Its files, as Snakemake targets.
+BY_DVC_TARGETS = [t for name in BY_DVC for t in PIPELINE.steps[name].targets()]
 
 
 def family(name: str) -> set[str]:

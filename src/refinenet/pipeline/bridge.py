@@ -58,10 +58,17 @@ def pipeline() -> Pipeline:
     return Pipeline(config.read_raw())
 
 
+def _check_names(steps: dict[str, Step], names: list[str]) -> None:
+    """Every name is a step of this params file's pipeline (a dvc.yaml stage), or a one-line error naming them."""
+    unknown = [name for name in names if name not in steps]
+    if unknown:
+        raise ParamsError("(stages)", f"no step {', '.join(repr(n) for n in unknown)} in this params file's "
+                                      f"pipeline ({', '.join(steps)})")
+
+
 def run(name: str, cores: str) -> int:
     steps = pipeline().steps
-    if name not in steps:
-        raise ParamsError("(stages)", f"no step '{name}' in this params file's pipeline ({', '.join(steps)})")
+    _check_names(steps, [name])
     step = steps[name]
     targets = step.targets()
     for path in prune(step, targets):
@@ -123,10 +130,7 @@ def sync(names: list[str]) -> int:
     Snakemake, once DVC has them all: a run that built only some stages (`dvc repro` of the main job) and was
     pulled elsewhere syncs those."""
     steps = pipeline().steps
-    unknown = [name for name in names if name not in steps]
-    if unknown:
-        print(f"error: sync: no step named {', '.join(unknown)}", file=sys.stderr)
-        return 2
+    _check_names(steps, names)
     status = subprocess.run(["dvc", "status", "--json", *names], capture_output=True, text=True, check=True)
     if json.loads(status.stdout or "{}"):
         print("sync: `dvc status` is not clean; run `dvc checkout` or `dvc repro` first", file=sys.stderr)
