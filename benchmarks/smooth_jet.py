@@ -11,9 +11,9 @@ cloud's noise (the median residual of K = 20 jets), before features are computed
    clouds, from the clouds and MFPS normals of a finished pipeline run (`--run`, default this checkout).
 2. Retrained: the synthetic tables (mean, PGP) of a run whose profile sets smooth_jet (`--run`) beside the
    committed ones (`reports/`, or `--before`), with the share of points the jet took per category and Refine-Net's
-   error on them against the input's, and SmoothSurface per cloud.
+   error on them against the input's, SmoothSurface per cloud, and the run's training curves per cluster.
 
-    python benchmarks/smooth_jet.py [--run DIR] [--before CSV] [--stem NAME]
+    python benchmarks/smooth_jet.py [--run DIR] [--before DIR] [--stem NAME]
 
 The run's Refine-Net is labelled by its smooth_jet ratio, and by its training noise levels and points per cloud
 where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or
@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from machine import machine_info, write_results
+from training_study import pipeline_training
 
 from refinenet import config as params_lib
 from refinenet.data.io import load_record, read_normals
@@ -111,10 +112,12 @@ def retrained(run: Path, before: Path, ratio: float, label: str, fits: dict[str,
 
 
 def run_label(params: params_lib.Params) -> str:
-    """The run's settings that set its Refine-Net apart: the ratio, and the training noise levels and points per
-    cloud where they differ from this checkout's profile's."""
+    """The run's settings that set its Refine-Net apart: the ratio, and the extra jet input, training noise levels
+    and points per cloud where they differ from this checkout's profile's."""
     ours = params_lib.load(ROOT / "params.yaml")
     label = f"smooth_jet = {params.features.smooth_jet}"
+    if params.features.jet_k != ours.features.jet_k:
+        label += f", jet_k = {params.features.jet_k}"
     if params.noise.train != ours.noise.train:
         label += ", training noise " + ", ".join(f"{level:g}" for level in params.noise.train) + "%"
     if params.training.max_train_points_per_cloud != ours.training.max_train_points_per_cloud:
@@ -186,7 +189,7 @@ def markdown(record: dict) -> str:
                           list(r["share"]))[2:],
                   "SmoothSurface per cloud (mean error; Jet's is the same in both runs):", "",
                   *_table("method", r["smooth_per_cloud"], list(next(iter(r["smooth_per_cloud"].values())))),
-                  "## Findings", "", *findings(r), ""]
+                  *r.get("training", [])[1:], "", "## Findings", "", *findings(r), ""]
     lines += [f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']} ({record['machine']['cores']} "
               "cores).", ""]
     return "\n".join(lines)
@@ -211,6 +214,7 @@ def main() -> None:
               "clouds": rows}
     if params.features.smooth_jet is not None:
         record["retrained"] = retrained(args.run, args.before, params.features.smooth_jet, run_label(params), fits)
+        record["retrained"]["training"] = pipeline_training(args.run, params)
     record.update(wall_s=time.perf_counter() - start, machine=machine_info())
     write_results(args.out, args.stem, record, markdown(record))
     print(markdown(record))
