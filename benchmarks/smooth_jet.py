@@ -15,8 +15,8 @@ cloud's noise (the median residual of K = 20 jets), before features are computed
 
     python benchmarks/smooth_jet.py [--run DIR] [--before DIR] [--stem NAME]
 
-The run's Refine-Net is labelled by its smooth_jet ratio, and by its training noise levels and points per cloud
-where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or
+The run's Refine-Net is labelled by its smooth_jet ratio, and by its jet_k, training noise levels and points per
+cloud where they differ from this checkout's profile's. Writes benchmarks/results/smooth_jet.json and smooth_jet.md (or
 `--stem`).
 """
 
@@ -189,7 +189,7 @@ def markdown(record: dict) -> str:
                           list(r["share"]))[2:],
                   "SmoothSurface per cloud (mean error; Jet's is the same in both runs):", "",
                   *_table("method", r["smooth_per_cloud"], list(next(iter(r["smooth_per_cloud"].values())))),
-                  *r.get("training", [])[1:], "", "## Findings", "", *findings(r), ""]
+                  *r["training"][1:], "", "## Findings", "", *findings(r), ""]
     lines += [f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']} ({record['machine']['cores']} "
               "cores).", ""]
     return "\n".join(lines)
