@@ -76,7 +76,8 @@ def test_params_load_into_typed_blocks_from_any_working_directory(tmp_path, monk
     params = config.load(REPO / "params.yaml")
     assert params.profile == RAW["profile"]
     assert params.mfps.scales == tuple(RAW["mfps"]["scales"])
-    assert params.features.n_normals == 9 + (params.features.pca_k is not None)
+    features = params.features
+    assert features.n_normals == 9 + (features.pca_k is not None) + (features.jet_k is not None)
     assert params.noise.levels("test", "BigNoise") == RAW["noise"]["test"]["BigNoise"]
 
 

@@ -210,11 +210,12 @@ def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
 
 def test_a_wide_pca_input_is_a_variant_of_the_features_on_mfps_normals():
     """pca_input adds a K = 100 PCA normal to MFPS's inputs: every per-variant step its own, full's MFPS normals
-    read, one more normal per point (X = 10) for its networks."""
+    read, one more normal per point for its networks (X = 10 over the paper's 9, 11 with the profile's K = 50 jet)."""
     assert set(PIPELINE.owners["pca_input"].values()) == {"pca_input"}
     assert STEPS["features_pca_input"].deps == STEPS["features"].deps
-    assert PIPELINE.params["pca_input"].features.n_normals == 10
-    assert PIPELINE.full.features.n_normals == 9 + (PIPELINE.full.features.pca_k is not None)
+    for features in (PIPELINE.params["pca_input"].features, PIPELINE.full.features):
+        assert features.n_normals == 9 + (features.pca_k is not None) + (features.jet_k is not None)
+    assert PIPELINE.params["pca_input"].features.pca_k == 100
 
 
 def test_refining_another_estimator_trains_on_its_normals(tmp_path):

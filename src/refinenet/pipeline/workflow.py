@@ -529,12 +529,13 @@ class Pipeline:
         if table.variants:
             reference = self.params[REFERENCE if REFERENCE in table.variants else FULL]
             f, n, t, pa = reference.features, reference.network, reference.training, reference.patches
-            wide = " and ".join(f"a {METHOD_NAMES[m]} K = {k}" for m, k in f.wide_normals)
+            wide = " and ".join(f"a {METHOD_NAMES[m]} K = {k} normal" for m, k in f.wide_normals)
+            last = "the last" if len(f.wide_normals) == 1 else f"the last {len(f.wide_normals)}"
             parts.append(
                 f"Refine-Net: {n.preset} network, features {n.features}, connection {n.connection}, "
                 + OUTPUT_CAPTIONS.get(n.output, "") +
                 f"Kc = {reference.clustering.n_clusters}, X = {f.n_normals}"
-                + (f" (the last {wide} normal)" if wide else "")
+                + (f" ({last}: {wide})" if wide else "")
                 + (f", a K = 100 Jet normal where its residual is < {f.smooth_jet} x the noise" if f.smooth_jet else "")
                 + f", r_f = {f.r_f}, {f.frame_mode} frames, {pa.mode} patches; {t.optimizer} lr {t.lr}"
                 + (" (cosine decay)" if t.lr_schedule == "cosine" else "") + ", "
