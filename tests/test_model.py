@@ -11,6 +11,7 @@ from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
     NetworkConfig,
+    PointBatchNorm,
     RefineNet,
     RotationMatrix,
     TransformationMatrix,
@@ -19,6 +20,7 @@ from refinenet.network.model import (
     example_inputs,
     for_inference,
     fuse_batch_norm,
+    max_pool_linear_bn,
     preset,
     quaternion_to_matrix,
     reduced_precision,
@@ -169,6 +171,52 @@ def test_reduced_precision_copy_computes_the_feature_convolutions_in_bfloat16():
     assert reduced(*inputs).dtype == torch.float32 and angles.max() < 1.0, angles.max()
     with pytest.raises(ValueError, match="precision 'float16'"):
         reduced_precision(model, "float16")
+
+
+def _pooling_layers(seed: int = 0) -> tuple[torch.nn.Linear, torch.nn.BatchNorm1d]:
+    """The point module's last layer in float64, with some BN scales negative (where the max-pool selects the
+    smallest product) and non-trivial running statistics."""
+    torch.manual_seed(seed)
+    linear, bn = torch.nn.Linear(16, 32).double(), PointBatchNorm(32).double()
+    with torch.no_grad():
+        bn.weight.uniform_(-1.0, 1.0)
+        bn.bias.uniform_(-1.0, 1.0)
+        bn.running_mean.uniform_(-0.5, 0.5)
+        bn.running_var.uniform_(0.5, 2.0)
+    return linear, bn
+
+
+def _plain_pooling(x, linear, bn):
+    return bn(linear(x)).amax(dim=1)
+
+
+@pytest.mark.parametrize("training", [True, False])
+def test_max_pool_linear_bn_equals_bn_then_max_pool_with_the_same_gradients(training: bool):
+    x = torch.randn(6, 20, 16, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    grad = torch.randn(6, 32, dtype=torch.float64, generator=torch.Generator().manual_seed(2))
+    results = []
+    for pool in (_plain_pooling, max_pool_linear_bn):
+        linear, bn = _pooling_layers()
+        linear.train(training), bn.train(training)
+        inputs = x.clone().requires_grad_(True)
+        out = pool(inputs, linear, bn)
+        out.backward(grad)
+        results.append([out, inputs.grad, linear.weight.grad, linear.bias.grad, bn.weight.grad, bn.bias.grad,
+                         bn.running_mean, bn.running_var, bn.num_batches_tracked])
+    assert (results[1][4] != 0).all()  # every channel's BN scale got a gradient
+    for plain, fast in zip(*results, strict=True):
+        torch.testing.assert_close(fast, plain, rtol=1e-9, atol=1e-10)
+
+
+def test_max_pool_linear_bn_of_a_folded_layer_is_the_max_pool_of_the_linear():
+    linear, bn = _pooling_layers()
+    linear.eval(), bn.eval()
+    folded = torch.nn.utils.fusion.fuse_linear_bn_eval(linear, bn)
+    x = torch.randn(6, 20, 16, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        fast = max_pool_linear_bn(x, folded, torch.nn.Identity())
+        torch.testing.assert_close(fast, folded(x).amax(dim=1), rtol=1e-12, atol=1e-12)
+        torch.testing.assert_close(fast, _plain_pooling(x, linear, bn), rtol=1e-9, atol=1e-10)
 
 
 def test_weight_matrix_connection_computes_th_tp_v():
