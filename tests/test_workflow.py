@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from refinenet.errors import ParamsError
-from refinenet.pipeline import workflow
+from refinenet.pipeline import bridge, workflow
 
 REPO = Path(__file__).resolve().parents[1]
 PIPELINE = workflow.Pipeline(yaml.safe_load((REPO / "params.yaml").read_text()))
@@ -43,6 +43,27 @@ def test_local_runs_select_jobs_only_when_a_job_ends(tmp_path):
 def test_dvc_yaml_is_generated_from_the_step_declarations():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     assert (REPO / "dvc.yaml").read_text() == workflow.render_dvc_yaml(raw), "run python -m refinenet.pipeline.workflow"
+
+
+def test_a_params_edit_that_drops_a_tracked_key_leaves_dvc_lock_alone_with_one_line(tmp_path, monkeypatch, capsys):
+    """`variant_budget: {}` (the seed-spread recipe) removes keys dvc.yaml tracks: after Snakemake's run, the record
+    step says how to regenerate dvc.yaml instead of DVC's traceback and a failed run; regenerated, it is current."""
+    raw = yaml.safe_load((REPO / "params.yaml").read_text())
+    assert raw["profiles"]["cpu"]["variant_budget"], "the cpu profile no longer has a variant budget to drop"
+    raw["profiles"]["cpu"]["variant_budget"] = {}
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(raw))
+    (tmp_path / "dvc.yaml").write_text((REPO / "dvc.yaml").read_text())
+    (tmp_path / ".dvc").mkdir()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(bridge.shutil, "which", lambda name: name)
+    monkeypatch.setattr(bridge, "up_to_date_files", lambda: pytest.fail("recorded against a stale dvc.yaml"))
+    assert bridge.main(["record"]) == 0
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "python -m refinenet.pipeline.workflow" in err
+    assert not (tmp_path / "dvc.lock").exists()
+    assert workflow.main(["--check"]) == 1
+    assert workflow.main([]) == 0 and workflow.main(["--check"]) == 0
+    assert "profiles.cpu.variant_budget.training" not in (tmp_path / "dvc.yaml").read_text()
 
 
 def test_dvc_stages_list_profile_overrides_of_their_keys():

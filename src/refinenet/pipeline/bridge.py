@@ -22,7 +22,7 @@ from pathlib import Path
 
 from refinenet import config
 from refinenet.errors import ParamsError, RefineNetError
-from refinenet.pipeline.workflow import Pipeline, Step
+from refinenet.pipeline.workflow import REGENERATE, Pipeline, Step, dvc_yaml_is_current
 
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", "workflow/Snakefile"]
 
@@ -94,9 +94,14 @@ def record() -> int:
     if not Path(".dvc").is_dir() or shutil.which("dvc") is None:
         print("record: no DVC repository here; nothing recorded")
         return 0
+    raw = config.read_raw()
+    if not dvc_yaml_is_current(raw):
+        print(f"record: dvc.yaml does not track params.yaml's present keys, nothing recorded in dvc.lock; "
+              f"{REGENERATE}, then run snakemake again to record", file=sys.stderr)
+        return 0
     done = up_to_date_files()
     finished = []
-    for step in pipeline().steps.values():
+    for step in Pipeline(raw).steps.values():
         targets = step.targets()
         if set(targets) <= done:
             prune(step, targets)

@@ -30,6 +30,7 @@ from refinenet.estimators.mfps import METHODS as MFPS_METHODS
 from refinenet.evaluation.table import METHOD_NAMES
 
 DVC_FILE = Path("dvc.yaml")
+REGENERATE = "run `python -m refinenet.pipeline.workflow` to regenerate it from params.yaml"
 REFINENET = "refinenet"
 FULL = config.FULL
 REFERENCE = config.REFERENCE
@@ -868,19 +869,24 @@ def render_dvc_yaml(raw: dict[str, Any]) -> str:
     return header + yaml.safe_dump(dvc_yaml(raw), sort_keys=False, width=120)
 
 
+def dvc_yaml_is_current(raw: dict[str, Any]) -> bool:
+    """Whether dvc.yaml is the one these params generate: an edit that adds or removes a params key (e.g.
+    `variant_budget: {}`) changes the keys its stages track, and DVC cannot record a stage whose keys are gone."""
+    return DVC_FILE.exists() and DVC_FILE.read_text() == render_dvc_yaml(raw)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="Write dvc.yaml from the pipeline's step declarations.")
     parser.add_argument("--params", default="params.yaml")
     parser.add_argument("--check", action="store_true", help="exit 1 if dvc.yaml is out of date")
     args = parser.parse_args(argv)
-    text = render_dvc_yaml(config.read_raw(args.params))
+    raw = config.read_raw(args.params)
     if args.check:
-        current = DVC_FILE.read_text() if DVC_FILE.exists() else ""
-        if current != text:
-            print("dvc.yaml is out of date: run `python -m refinenet.pipeline.workflow`", file=sys.stderr)
+        if not dvc_yaml_is_current(raw):
+            print(f"dvc.yaml is out of date: {REGENERATE}", file=sys.stderr)
             return 1
         return 0
-    DVC_FILE.write_text(text)
+    DVC_FILE.write_text(render_dvc_yaml(raw))
     return 0
 
 
