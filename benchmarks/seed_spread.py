@@ -6,7 +6,8 @@ a scored subset), so that the full set of tables fits its budget. The spread a u
 show is that of the profile's own training: measure it on a run whose `variant_budget` is `{}` in every profile,
 so that the seed variants train, infer and score exactly as full does and `reference` is full itself:
 
-    # in a clone with a finished default run, params.yaml edited: `variant_budget: {}` in the profiles
+    # in a clone, params.yaml edited: `variant_budget: {}` in the profiles
+    python -m refinenet.pipeline.workflow      # dvc.yaml for the edited keys, so that DVC records the run
     snakemake -j2 reports/table_seeds.csv
     python benchmarks/seed_spread.py RUN_DIR
 
