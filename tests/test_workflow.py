@@ -210,7 +210,12 @@ def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
         assert name == "table_loss" or workflow.refinenet("reference") in table.methods, name
         assert workflow.REFINENET not in table.methods, name
         assert PIPELINE.scored_subset(table.methods) == 2500, name
-        assert "Every row scored on the same seeded 2500 points" in PIPELINE.caption(table), name
+        caption = PIPELINE.caption(table)
+        assert "Every row scored on the same seeded 2500 points" in caption, name
+        # The rows were trained as reference is, 2 epochs, not full's 6, whether or not reference is a row.
+        assert "<= 2 epochs" in caption and "under the variant budget: training.max_epochs = 2" in caption, name
+    loss = PIPELINE.caption(workflow.TABLES["table_loss"])
+    assert "l1: nothing (the settings above); l2: training.loss = mse." in loss
     assert PIPELINE.scored_subset(workflow.TABLES["table_synthetic"].methods) is None
     for step in ("training_l1", "training_reference", "training_kc2"):
         assert "profiles.cpu.variant_budget.training" in workflow.tracked_keys(PIPELINE.raw, STEPS[step]), step

@@ -527,8 +527,11 @@ class Pipeline:
         if set(MFPS_METHODS) & set(methods):
             parts.append(f"MFPS K = {{{', '.join(map(str, m.scales))}}}, R = {m.trials}, "
                          f"theta_t = {m.theta_t} deg, |A| <= {m.a_max}, eta = {m.eta}.")
+        # Every variant is reference (full under the variant budget) with its changes, so a table of variants
+        # names reference's settings, whether or not reference is one of its rows (table_loss's are l1 and l2).
+        compared = set(table.variants) - {FULL}
         if table.variants:
-            reference = self.params[REFERENCE if REFERENCE in table.variants else FULL]
+            reference = self.params[REFERENCE if compared else FULL]
             f, n, t, pa = reference.features, reference.network, reference.training, reference.patches
             wide = " and ".join(f"a {METHOD_NAMES[m]} K = {k} normal" for m, k in f.wide_normals)
             last = "the last" if len(f.wide_normals) == 1 else f"the last {len(f.wide_normals)}"
@@ -545,15 +548,16 @@ class Pipeline:
                    + (" (drawn anew every epoch)" if t.resample_points else "")
                    if t.max_train_points_per_cloud else "") + ".")
         budget = self.changes(REFERENCE)
-        if REFERENCE in table.variants and budget:
+        if compared and budget:
             main = asdict(self.full)
-            parts.append("Every variant, and Refine-Net as the reference row, under the variant budget: "
-                         + _settings(budget) + " (the main tables' Refine-Net: "
+            parts.append("Every variant" + (", and Refine-Net as the reference row," if REFERENCE in compared else "")
+                         + " under the variant budget: " + _settings(budget) + " (the main tables' Refine-Net: "
                          + _settings({k: config.get(main, k) for k in budget}) + ").")
         points = self.scored_subset(table.methods)
         if points is not None:
             parts.append(f"Every row scored on the same seeded {points} points of each test cloud.")
-        changed = [f"{v}: " + _settings(self.changes(v)) for v in table.variants if v not in (FULL, REFERENCE)]
+        changed = [f"{v}: " + (_settings(self.changes(v)) or "nothing (the settings above)")
+                   for v in table.variants if v not in (FULL, REFERENCE)]
         if changed:
             parts.append("Variants of Refine-Net (what each changes): " + "; ".join(changed) + ".")
         return " ".join(parts)
