@@ -66,6 +66,8 @@ def main() -> None:
     parser.add_argument("--command", default="bash scripts/run.sh")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--note", default="", help="how the run went, when not in one piece (a sentence)")
+    parser.add_argument("--no-setup", action="store_true",
+                        help="the run went on in a clone already set up (a table after the main job)")
     args = parser.parse_args()
     summary = rule_summary(args.run_dir)
     machine = machine_info()
@@ -73,7 +75,8 @@ def main() -> None:
         f"# Pipeline run, profile `{args.profile}`",
         "",
         f"`{args.command}` on a fresh clone: **{duration(args.wall_seconds)}** wall time in total "
-        f"(environment set-up included), on {machine['cores']} cores ({machine['cpu']}), {platform.machine()}, "
+        + ("(no set-up: the environment was already there)" if args.no_setup else "(environment set-up included)")
+        + f", on {machine['cores']} cores ({machine['cpu']}), {platform.machine()}, "
         f"Python {machine['python']}. Job seconds are summed over jobs that ran two at a time." +
         (f" {args.note}" if args.note else ""),
         "",
