@@ -111,11 +111,11 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
               f"(input {result['input_val_mean_deg']:.2f}), {cpu / 60:.1f} CPU min")
 
 
-def kept(history: pd.DataFrame, result: dict) -> tuple[int, str, str]:
+def kept(history: pd.DataFrame, result: dict) -> tuple[int, float, str]:
     """The kept epoch (lowest validation RMSE, 0-based), the share of the input's mean error it removes, and the
     last epoch's change of the validation mean."""
     val, best = history["val_mean_deg"], int(history["val_rmse_deg"].idxmin())
-    removed = f"{100 * (1 - val.iloc[best] / result['input_val_mean_deg']):.0f}%"
+    removed = 100 * (1 - val.iloc[best] / result["input_val_mean_deg"])
     last = f"{100 * (val.iloc[-1] / val.iloc[-2] - 1):+.1f}%" if len(val) > 1 else ""
     return best, removed, last
 
@@ -147,7 +147,7 @@ def pipeline_training(run: Path, params: config.Params) -> list[str]:
                      f"{result['input_val_mean_deg']:.2f} / {result['input_val_rmse_deg']:.2f} | "
                      f"{', '.join(f'{v:.2f}' for v in val)} | {val.iloc[best]:.2f} / "
                      f"{history['val_rmse_deg'].iloc[best]:.2f} | "
-                     f"{removed} | {last} | "
+                     f"{removed:.0f}% | {last} | "
                      f"{history['seconds'].sum():.0f} |")
     return lines
 
@@ -182,7 +182,7 @@ def report(params: config.Params, run_lines: list[str]) -> None:
     runs.sort(key=lambda run: (run[0]["cluster"], order.index(run[0]["experiment"]), run[0]["training"]["max_epochs"]))
     # The cpu recipe's rate is constant, so the first 4 epochs of a longer cpu run are the 4-epoch run itself.
     # A cluster is known by its number and size: another clustering's cluster of that number is another one.
-    baseline = {_cluster_key(record): (history.iloc[:4], record["result"]["input_val_mean_deg"])
+    baseline = {_cluster_key(record): (history.iloc[:4], record["result"])
                 for record, history in runs if record["experiment"] == "cpu" and len(history) >= 4}
     rows, curves, gains = [], {}, []
     for record, history in runs:
@@ -196,20 +196,21 @@ def report(params: config.Params, run_lines: list[str]) -> None:
             "input": f"{result['input_val_mean_deg']:.2f}",
             **{f"epoch {e}": f"{val.iloc[e - 1]:.2f}" if len(val) >= e else "" for e in (1, 2, 4, 6, 8)},
             "kept (epoch)": f"{val.iloc[best]:.2f} ({best + 1})",
-            "of input removed": removed,
+            "of input removed": f"{removed:.0f}%",
             "last change": last,
             "CPU min": f"{history['cpu_s'].iloc[-1] / 60:.1f}",
             "vs cpu recipe": "",
             "removed per extra CPU min": "",
         }
-        if _cluster_key(record) in baseline:
-            reference, reference_input = baseline[_cluster_key(record)]
-            reference_mean = reference["val_mean_deg"].iloc[int(reference["val_rmse_deg"].idxmin())]
+        if (key := _cluster_key(record)) in baseline:
+            reference, reference_result = baseline[key]
+            reference_best, reference_removed, _ = kept(reference, reference_result)
+            reference_mean = reference["val_mean_deg"].iloc[reference_best]
             extra = (history["cpu_s"].iloc[-1] - reference["cpu_s"].iloc[-1]) / 60
             row["vs cpu recipe"] = f"{val.iloc[best] - reference_mean:+.2f} deg, {extra:+.1f} CPU min"
             # Compared in points of the input's error removed, not in degrees: a run with more points per cloud
             # is validated on other points, whose input error differs.
-            gain = 100 * (reference_mean / reference_input - val.iloc[best] / result["input_val_mean_deg"])
+            gain = removed - reference_removed
             if len(history) > len(reference) or record["experiment"] != "cpu":
                 row["removed per extra CPU min"] = _per_minute(gain, extra)
                 gains.append((record["cluster"], label, gain, extra))
