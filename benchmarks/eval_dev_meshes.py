@@ -20,18 +20,19 @@ protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-wei
 degrees away.
 
     python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2] [--methods refinenet]
-                                         [--release FOLDER --stem NAME]
+                                         [--release FOLDER --out DIR]
 
 `--methods` reruns only some methods (after a change to Refine-Net, say) and keeps the other methods' rows from
 the committed run (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh and the level.
 
 `--release` evaluates another run's exported networks (its `src/refinenet/shipped` after `snakemake -j2 release`,
-e.g. a candidate setting's) in place of the shipped ones; `--stem` names the results apart.
+e.g. a candidate setting's) in place of the shipped ones; its results go under `--out`, a folder outside
+benchmarks/results, which holds the shipped networks' evaluation only.
 
-Writes benchmarks/results/dev_meshes.json and dev_meshes.md (or `--stem`). Wall and CPU seconds are recorded for
-every run (one run each), with the load average at start and end. Each finished cloud's rows are appended to
-STEM.partial.jsonl beside them, so that a killed run (the whole takes hours on 2 cores) resumes where it stopped when
-started again with the same settings; the file is removed once the results are written.
+Writes benchmarks/results/dev_meshes.json and dev_meshes.md (or under `--out`). Wall and CPU seconds are recorded
+for every run (one run each), with the load average at start and end. Each finished cloud's rows are appended to
+dev_meshes.partial.jsonl beside them, so that a killed run (the whole takes hours on 2 cores) resumes where it
+stopped when started again with the same settings; the file is removed once the results are written.
 """
 
 from __future__ import annotations
@@ -64,6 +65,8 @@ from refinenet.network.release import SHIPPED, load_release
 PARAMS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False)
 
 RESULTS = Path(__file__).parent / "results"
+#: The results' file names: STEM.json and STEM.md.
+STEM = "dev_meshes"
 #: FeatureConfig's inputs beyond the paper, named in the report when a release uses them.
 BEYOND_PAPER_INPUTS = ("pca_k", "jet_k", "smooth_jet")
 DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "meshes" / "dev"
@@ -221,7 +224,7 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         + "; ".join(f"the {folder} meshes at {category}'s levels {', '.join(map(str, levels[category]))}"
                     for folder, category in FOLDERS.items())
         + f"; and every mesh at {BIG_NOISE}'s levels {', '.join(map(str, levels[BIG_NOISE]))}. Seeds from "
-        f"`derive_seed({GLOBAL_SEED}, ...)` (in {record['stem']}.json). PCA: k = {', '.join(map(str, PCA_KS))} and per "
+        f"`derive_seed({GLOBAL_SEED}, ...)` (in {STEM}.json). PCA: k = {', '.join(map(str, PCA_KS))} and per "
         "category the k of lowest mean error (chosen: "
         + ", ".join(f"{c} {k}" for c, k in record["pca_best_k"].items())
         + f"); Jet: k = {PARAMS.baselines.jet_k} ({PARAMS.baselines.big_noise_k} on BigNoise), degree "
@@ -261,7 +264,7 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         "## Per cloud",
         "",
         "Mean error in degrees per test cloud and method (every statistic, and each run's wall and CPU seconds, "
-        f"in {record['stem']}.json).",
+        f"in {STEM}.json).",
         "",
     ]
     wide = per_cloud.pivot_table(index=["category", "mesh", "noise"], columns="method", values="mean", sort=False)
@@ -326,15 +329,17 @@ def main() -> None:
                              "clouds: checked by their seeds and sizes)")
     parser.add_argument("--release", type=Path, default=SHIPPED,
                         help="a release folder to evaluate in place of the shipped networks")
-    parser.add_argument("--stem", default="dev_meshes", help="results are written to STEM.json and STEM.md")
     args = parser.parse_args()
+    if args.release.resolve() != SHIPPED and args.out.resolve() == RESULTS.resolve():
+        sys.exit(f"eval_dev_meshes: --release {args.release}: give --out a folder outside {RESULTS} (it holds the "
+                 "shipped networks' evaluation only)")
     test_clouds = clouds(dev_meshes(args.meshes))
     precision = resolve_precision("auto", resolve_device("cpu"))
     release = load_release(args.release, precision=precision)
     kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], args.points)
     load_start, start = os.getloadavg()[0], time.perf_counter()
     args.out.mkdir(parents=True, exist_ok=True)
-    partial = args.out / f"{args.stem}.partial.jsonl"
+    partial = args.out / f"{STEM}.partial.jsonl"
     settings = {"points": args.points, "threads": args.threads, "methods": list(args.methods),
                 "precision": precision, "release": shipped_networks(release)["fingerprint"]}
     finished = finished_clouds(partial, settings)
@@ -370,7 +375,6 @@ def main() -> None:
                              "mean": near_edge_means(per_cloud, "SharpFeature")},
         "per_cloud": json.loads(per_cloud.to_json(orient="records")),
         "release": shipped_networks(release),
-        "stem": args.stem,
         "release_shipped": args.release.resolve() == SHIPPED,
         "release_folder": str(args.release),
         "release_inputs": {k: v for k in BEYOND_PAPER_INPUTS if (v := getattr(release.params.features, k))},
@@ -379,7 +383,7 @@ def main() -> None:
         "load_average_1min": [load_start, os.getloadavg()[0]],
         "machine": machine(args.threads),
     }
-    write_results(args.out, args.stem, record, markdown(record, per_cloud, category_table))
+    write_results(args.out, STEM, record, markdown(record, per_cloud, category_table))
     partial.unlink()
     print(to_csv_frame(category_table, NAMES).round(3).to_string())
 
