@@ -45,7 +45,7 @@ def split_priority(split):
     """Priority of a job of one split: a training cloud's (and the clustering's) before a test cloud's. Training, the
     longest step, waits for every training cloud's features and the clusters; the test clouds' jobs can fill the core
     it leaves idle while its last network trains. Run the other way round, they delay its start instead
-    (benchmarks/results/pipeline_cpu.md)."""
+    (benchmarks/results/pipeline.md)."""
     return int(split == "train")
 
 
