@@ -6,9 +6,9 @@ and the CPU time of each (one thread, as a pipeline training job runs).
     python benchmarks/training_study.py RUN_DIR --report      (training.md and training.png from the kept runs,
                                                                and RUN_DIR's own training, every cluster)
 
-Each experiment writes benchmarks/results/training/cluster<C>_<name>_e<epochs>.csv (the history, with cumulative CPU
-seconds) and .json (the settings, how it ended and the validation error of the initial normals it refines).
-Patience is set to the epoch count, so every curve runs to the end.
+Each experiment is one entry of benchmarks/results/training.json, named cluster<C>_<name>_e<epochs> and replaced
+when rerun: its history per epoch (with cumulative CPU seconds), the settings, how it ended and the validation error
+of the initial normals it refines. Patience is set to the epoch count, so every curve runs to the end.
 """
 
 from __future__ import annotations
@@ -38,7 +38,9 @@ from refinenet.network.training import HISTORY as HISTORY_FILE  # noqa: E402
 from refinenet.network.training import RESULT, cluster_data, train_cluster  # noqa: E402
 from refinenet.pipeline.workflow import CLOUD, CLUSTER_MODEL, FEATURES, FULL, HISTORY, NETWORK  # noqa: E402
 
-OUT = Path(__file__).parent / "results" / "training"
+RESULTS = Path(__file__).parent / "results"
+#: Every kept experiment: name -> its record and history.
+RUNS = RESULTS / "training.json"
 #: The recipe the study started from: the cpu profile's training before it (commit 39646f5). Every experiment
 #: is this with some changes, whatever the run's params.yaml now says.
 CPU_RECIPE = {"optimizer": "adam", "lr": 1.0e-3, "lr_schedule": "constant", "weight_decay": 0.0, "batch_size": 256,
@@ -87,7 +89,7 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
         key = str(cloud_path.relative_to(run / "results" / "clouds")).removesuffix(".npz")
         cloud, features = load_for_cloud(run / CLOUD.format(cloud=key), run / FEATURES.format(variant=FULL, cloud=key))
         clouds.append(prepare(cloud.points, features, model, cloud.normals))
-    OUT.mkdir(parents=True, exist_ok=True)
+    runs = json.loads(RUNS.read_text()) if RUNS.is_file() else {}
     for name in names:
         changes = CPU_RECIPE | EXPERIMENTS[name][1]
         network = architecture(replace(params.network, output=changes.pop("output", "normal")), params.features,
@@ -102,11 +104,11 @@ def study(run: Path, params: config.Params, cluster: int, names: list[str], epoc
             history = pd.read_csv(Path(tmp) / HISTORY_FILE)
             result = json.loads((Path(tmp) / RESULT).read_text())
         history["cpu_s"] = history["seconds"].cumsum() * cpu / wall
-        stem = OUT / f"cluster{cluster}_{name}_e{epochs}"
-        history.to_csv(stem.with_suffix(".csv"), index=False)
-        record = {"cluster": cluster, "experiment": name, "changes": EXPERIMENTS[name][1], "training": asdict(train),
-                  "profile": params.profile, "result": result, "cpu_s": cpu, "wall_s": wall, "machine": machine_info()}
-        stem.with_suffix(".json").write_text(json.dumps(record, indent=2) + "\n")
+        runs[f"cluster{cluster}_{name}_e{epochs}"] = {
+            "cluster": cluster, "experiment": name, "changes": EXPERIMENTS[name][1], "training": asdict(train),
+            "profile": params.profile, "result": result, "cpu_s": cpu, "wall_s": wall, "machine": machine_info(),
+            "history": history.to_dict(orient="list")}
+        RUNS.write_text(json.dumps(dict(sorted(runs.items())), indent=2) + "\n")
         print(f"cluster {cluster} {name}: best val mean {history['val_mean_deg'].min():.2f} deg "
               f"(input {result['input_val_mean_deg']:.2f}), {cpu / 60:.1f} CPU min")
 
@@ -174,10 +176,7 @@ def _cluster_key(record: dict) -> tuple[int, int]:
 def report(params: config.Params, run_lines: list[str]) -> None:
     """training.md (one row per kept experiment, compared with the cpu recipe's 4 epochs on the same cluster) and
     training.png (validation mean error against CPU minutes, one panel per cluster)."""
-    runs = []
-    for path in sorted(OUT.glob("cluster*_*.json")):
-        record = json.loads(path.read_text())
-        runs.append((record, pd.read_csv(path.with_suffix(".csv"))))
+    runs = [(record, pd.DataFrame(record["history"])) for record in json.loads(RUNS.read_text()).values()]
     order = list(EXPERIMENTS)
     runs.sort(key=lambda run: (run[0]["cluster"], order.index(run[0]["experiment"]), run[0]["training"]["max_epochs"]))
     # The cpu recipe's rate is constant, so the first 4 epochs of a longer cpu run are the 4-epoch run itself.
@@ -237,7 +236,7 @@ def report(params: config.Params, run_lines: list[str]) -> None:
         lines.append(f"- cluster {cluster}: " + "; ".join(
             f"{label} {gain:+.0f} points for {extra:+.1f} CPU min" for _, label, gain, extra in ranked))
     lines += ["", "![validation error against CPU minutes](training.png)", *run_lines]
-    (OUT.parent / "training.md").write_text("\n".join(lines) + "\n")
+    (RESULTS / "training.md").write_text("\n".join(lines) + "\n")
     fig, axes = plt.subplots(1, len(curves), figsize=(5 * len(curves), 4), squeeze=False)
     for ax, (cluster, cluster_runs) in zip(axes[0], sorted(curves.items()), strict=True):
         for name, history in cluster_runs:
@@ -245,7 +244,7 @@ def report(params: config.Params, run_lines: list[str]) -> None:
         ax.set(title=f"cluster {cluster}", xlabel="CPU minutes", ylabel="validation mean error (deg)")
         ax.legend(fontsize="small")
     fig.tight_layout()
-    fig.savefig(OUT.parent / "training.png", dpi=100, metadata={"Software": None})
+    fig.savefig(RESULTS / "training.png", dpi=100, metadata={"Software": None})
 
 
 if __name__ == "__main__":
