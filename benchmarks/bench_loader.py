@@ -3,17 +3,17 @@ patches, frames, height maps) in the training process and with worker processes 
 against a training step of the network on the same batches on this CPU, all timed in the same process on one
 cloud and feature cache of a run, at the run's settings.
 
-    python benchmarks/bench_loader.py RUN_DIR CLOUD_KEY [--batches 40] [--workers 0 1 2] [--out STEM]
+    python benchmarks/bench_loader.py RUN_DIR CLOUD_KEY [--batches 40] [--workers 0 1 2]
 
-On a GPU the network trains about 65,000 samples/s (the release network on one H100, fp32; measured on a lent
-machine, not here), so the rate per worker says how many workers a GPU job needs.
+Writes benchmarks/results/loader.json and loader.md (or under `--out`). On a GPU the network trains about 65,000
+samples/s (the release network on one H100, fp32; measured on a lent machine, not here), so the rate per worker says
+how many workers a GPU job needs.
 """
 
 from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import os
 import time
 from pathlib import Path
@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 from cluster_costs import H100_TRAIN_SAMPLES_S
-from machine import machine_info
+from machine import machine_info, write_results
 from scipy.spatial import cKDTree
 
 from refinenet import config
@@ -33,6 +33,8 @@ from refinenet.network.model import RefineNet, architecture
 from refinenet.network.training import cluster_data
 from refinenet.pipeline.workflow import CLOUD, FEATURES, FULL
 
+RESULTS = Path(__file__).parent / "results"
+
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -41,7 +43,7 @@ def main() -> int:
     parser.add_argument("--batches", type=int, default=40)
     parser.add_argument("--workers", type=int, nargs="+", default=[0, 1, 2], help="loader worker counts to time")
     parser.add_argument("--network-batches", type=int, default=4, help="batches of the timed network steps")
-    parser.add_argument("--out", type=Path, help="report stem: writes STEM.json and STEM.md")
+    parser.add_argument("--out", type=Path, default=RESULTS, help="the folder of loader.json and loader.md")
     args = parser.parse_args()
     torch.set_num_threads(1)  # a training job's one core
     params = config.load(args.run / "params.yaml")
@@ -107,9 +109,7 @@ def main() -> int:
               f"{needed}` (and as many cores) keep one H100 busy.", ""]
     text = "\n".join(lines)
     print(text)
-    if args.out:
-        args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-        args.out.with_suffix(".md").write_text(text)
+    write_results(args.out, "loader", result, text)
     return 0
 
 

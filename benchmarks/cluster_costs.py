@@ -1,7 +1,9 @@
 """What each rule costs at a profile's sizes, and the SLURM profile's per-rule resources derived from it.
 
     python benchmarks/cluster_costs.py --sample RUN_DIR --reference RUN_DIR \
-        --out benchmarks/results/cluster_costs --write-profile workflow/profiles/slurm/config.yaml
+        --write-profile workflow/profiles/slurm/config.yaml
+
+Writes benchmarks/results/cluster_costs.json and cluster_costs.md (or under `--out`).
 
 * `--sample`: a run folder at the target profile (e.g. `paper`) where a few jobs of the per-cloud CPU rules ran
   (`snakemake -j1 TARGETS`); their benchmark files give seconds and peak memory per job at the target's sizes, and
@@ -36,6 +38,7 @@ import pandas as pd
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+from machine import write_results  # noqa: E402
 from pipeline_report import job_benchmarks  # noqa: E402
 
 from refinenet import config  # noqa: E402
@@ -223,14 +226,14 @@ def main() -> int:
     parser.add_argument("--sample", type=Path, required=True)
     parser.add_argument("--reference", type=Path, nargs="+", required=True,
                         help="finished runs of smaller profiles (two sizes give a line through both)")
-    parser.add_argument("--out", type=Path, required=True, help="report stem: writes STEM.json and STEM.md")
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results",
+                        help="the folder of cluster_costs.json and cluster_costs.md")
     parser.add_argument("--write-profile", type=Path, help="a SLURM profile whose set-resources to regenerate")
     args = parser.parse_args()
     result = costs(args.sample.resolve(), [r.resolve() for r in args.reference])
     res = resources(result)
-    args.out.with_suffix(".json").write_text(json.dumps({**result, "resources": res}, indent=2) + "\n")
     text = markdown(result, res)
-    args.out.with_suffix(".md").write_text(text)
+    write_results(args.out, "cluster_costs", {**result, "resources": res}, text)
     print(text)
     if args.write_profile:
         target = Pipeline(config.read_raw(args.sample / "params.yaml"))
