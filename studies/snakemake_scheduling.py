@@ -1,12 +1,12 @@
 """Snakemake's own CPU with and without its job-rate limiter, on a workflow shaped like the full set's short-job phase:
 many ready jobs with many inputs each, waiting for 2 cores. The workflow's onstart hook (workflow/rules/scheduling.smk)
 drops the limiter for local runs; the reference run is the same workflow without the hook, in the same command.
-Writes benchmarks/results/snakemake_scheduling.{json,md}.
+Writes studies/results/snakemake_scheduling.{json,md}.
 
 Why it matters: on the full set (3,277 jobs) Snakemake's process held 52% of one of the 2 cores, stat-ing the inputs of
 ~1,000 ready jobs on every pass of its job selection, passes that the limiter's piling-up timers kept starting.
 
-    python benchmarks/snakemake_scheduling.py [--jobs 300] [--inputs 50] [--seconds 0.2]
+    python studies/snakemake_scheduling.py [--jobs 300] [--inputs 50] [--seconds 0.2]
 """
 
 from __future__ import annotations
@@ -19,7 +19,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from machine import machine_info, write_results
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # the benchmarks' helpers
+
+from machine import machine_info, write_results  # noqa: E402
 
 HOOK = Path(__file__).resolve().parents[1] / "workflow" / "rules" / "scheduling.smk"
 OUT = Path(__file__).parent / "results"
@@ -52,7 +54,7 @@ def main() -> None:
         hook = run(Path(tmp, "hook"), f'include: "{HOOK}"\n', args.jobs, args.inputs, args.seconds)
     ratio = hook["cpu_s"] / limiter["cpu_s"]
     print(f"limiter (Snakemake's default): {limiter}\nhook (no limiter): {hook}\nCPU ratio hook/limiter: {ratio:.2f}")
-    command = (f"python benchmarks/snakemake_scheduling.py --jobs {args.jobs} --inputs {args.inputs} "
+    command = (f"python studies/snakemake_scheduling.py --jobs {args.jobs} --inputs {args.inputs} "
                f"--seconds {args.seconds}")
     record = {"command": command, "machine": machine_info(), "limiter": limiter, "hook": hook,
               "cpu_ratio": round(ratio, 3)}

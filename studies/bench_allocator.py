@@ -4,10 +4,10 @@ training of a variant's cluster 0 (the run's settings, with `--epochs` and `--po
 a minute) and its inference of one test cloud. CPU time (user, kernel), minor page faults
 and peak memory per child; results equal in both (the training loss, the normals) or the benchmark fails.
 
-    python benchmarks/bench_allocator.py RUN_DIR [--variant kc2] [--cloud test/RichFeature/twistedstar_a_n0.05]
+    python studies/bench_allocator.py RUN_DIR [--variant kc2] [--cloud test/RichFeature/twistedstar_a_n0.05]
         [--epochs 1] [--points 300]
 
-Writes benchmarks/results/allocator.{json,md}.
+Writes studies/results/allocator.{json,md}.
 """
 
 from __future__ import annotations
@@ -24,12 +24,14 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from machine import machine_info, write_results
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # the benchmarks' helpers
 
-from refinenet.allocator import MMAP_THRESHOLD, TRIM_THRESHOLD
+from machine import machine_info, write_results  # noqa: E402
+
+from refinenet.allocator import MMAP_THRESHOLD, TRIM_THRESHOLD  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "benchmarks" / "results"
+OUT = Path(__file__).parent / "results"
 SETTINGS = ("default", "kept")  # glibc's default thresholds (the reference), then refinenet.allocator's
 
 
@@ -112,7 +114,7 @@ def main() -> None:
         print(f"{stage}: {by}")
         rows += [f"| {stage} | {setting} | {r['wall_s']} | {r['user_s']} | {r['kernel_s']} | {r['minor_faults']:,} "
                  f"| {r['peak_mb']:,} |" for setting, r in ((s, by[s]) for s in SETTINGS)]
-    command = (f"python benchmarks/bench_allocator.py RUN_DIR --variant {args.variant} --cloud {args.cloud} "
+    command = (f"python studies/bench_allocator.py RUN_DIR --variant {args.variant} --cloud {args.cloud} "
                f"--epochs {args.epochs} --points {args.points}")
     record = {"command": command, "run": str(args.run), "machine": machine_info(), **runs}
     markdown = "\n".join([
