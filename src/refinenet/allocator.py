@@ -2,7 +2,7 @@
 early: a freed block above an adaptive threshold is unmapped, and free memory at the top of the heap is trimmed
 above twice that threshold. A training step frees its batch's tensors and allocates them again the next step, so
 the kernel unmaps, zeroes and faults in the same pages thousands of times: a training job spent a quarter of its
-CPU time in the kernel. Fixed thresholds keep that memory for reuse (benchmarks/results/allocator.md: the training
+CPU time in the kernel. Fixed thresholds keep that memory for reuse (studies/results/allocator.md: the training
 stage's CPU time 0.76x, its peak memory within 2%)."""
 
 import ctypes

@@ -548,7 +548,7 @@ _CATALOGUE = (
     _spec("channel_b", _SHARP, "train", "blocks",
           heights=((2,), (1,), (2,)), xs=(0.3, 0.6, 0.3), ys=(1.0,), zs=(0.3, 1.0)),
     # shallow edges (the normal turns by 26-65 degrees; the dodecahedron's by 63): without them the networks
-    # smoothed across the test icosahedron's 42-degree edges (README "Training shapes"; seeds_icosahedron_b.md)
+    # smoothed across the test icosahedron's 42-degree edges (README "Training shapes"; studies/README.md)
     _spec("icosahedron_b", _SHARP, "train", "polyhedron", solid="icosahedron", stretch=0.6),
     _spec("torus_b", _SMOOTH, "train", "torus", major=1.0, minor=0.5),
     _spec("ellipsoid_b", _SMOOTH, "train", "ellipsoid", a=1.0, b=0.5, c=0.5),

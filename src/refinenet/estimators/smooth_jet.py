@@ -3,7 +3,7 @@
 
 MFPS keeps PCA with K = 50 wherever its surface-variation test finds no feature, and fits patches wherever it
 finds one, also on curved smooth surfaces (an ellipsoid's tips), where those patches are wrong by 10 degrees and
-more; Jet with K = 100 is better on both (benchmarks/results/smooth_surface.md). Which points a jet may take is
+more; Jet with K = 100 is better on both (studies/README.md). Which points a jet may take is
 decided by its own fit: where the RMS residual of the K = 100 jet is within `ratio` times the cloud's noise, the
 quadric explains the neighbourhood; across a crease or a groove it does not. The noise is the median residual of
 K = 20 jets: neighbourhoods that small lie on one smooth piece at most points even of a feature-rich shape.

@@ -3,7 +3,7 @@
 The networks learned from clouds of a given density and noise. Their neighbourhoods are the k nearest points, which
 shrink as the density grows while the noise does not: on a 100k-point mesh sample with 0.5% noise a 100-point patch
 is, relative to its size, as noisy as one of a 10k-point sample with 1.6% noise, and the shipped networks' error is
-56% above MFPS's there (benchmarks/results/density_transfer.md). `strata_needed` measures the noise of a cloud
+56% above MFPS's there (studies/results/density_transfer.md). `strata_needed` measures the noise of a cloud
 relative to its point spacing and halves the density until it is within a limit; `strata` splits the cloud into
 that many interleaved random subsets (strata), each estimated on its own. Every point keeps its coordinates and
 gets its normal from a subset whose noise the networks know; the subsets' spacing is sqrt(s) times the cloud's.
@@ -23,11 +23,11 @@ from refinenet.geometry.scale import sample_rows, spacing_unit
 #: at 100k points (1.33% of l_d) k = 16 reads 0.75, 32 reads 0.94 (a neighbourhood barely wider than the noise is a
 #: blob); noise-free at 10k points, k = 32 reads 0.08 and 64 reads 0.17 (the surface's curvature).
 NOISE_K = 32
-#: Nearest points per stratum in a consensus, and at most this many in all (benchmarks/results/strata.md).
+#: Nearest points per stratum in a consensus, and at most this many in all (studies/results/strata.md).
 CONSENSUS_PER_STRATUM = 4
 CONSENSUS_MAX_K = 32
 #: Neighbours whose normal is further than this from a point's own are taken to lie across a sharp feature and are
-#: left out of its consensus (benchmarks/results/strata.md: at the strata `auto_strata` picks, gates of 25-60 deg
+#: left out of its consensus (studies/results/strata.md: at the strata `auto_strata` picks, gates of 25-60 deg
 #: differ by at most 0.12 deg of mean error; on 2 strata of moai at 0.5% by 1.8, where wider gates do better; an
 #: ungated mean blurs sharp edges, tests/test_strata.py).
 CONSENSUS_ANGLE = 40.0

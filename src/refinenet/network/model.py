@@ -198,7 +198,7 @@ def max_pool_linear_bn(x: Tensor, linear: nn.Linear, bn: nn.BatchNorm1d | nn.Ide
     follow from those of x: mean W mean(x) + b, variance diag(W cov(x) W^T). Only the product itself is computed
     at every point, to find the selected ones; gradients reach the selected points alone, as through a max-pool.
     A training step of the cpu profile's network takes 0.77x the time in float32 on CPU, 0.90x under bfloat16
-    autocast (benchmarks/results/point_pooling.md). `bn` is nn.Identity once folded into the Linear
+    autocast (studies/results/point_pooling.md). `bn` is nn.Identity once folded into the Linear
     (`fuse_batch_norm`)."""
     batch, points, n_in = x.shape
     weight, bias = linear.weight, linear.bias
