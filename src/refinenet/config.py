@@ -205,7 +205,7 @@ class FeatureConfig:
     pca_k: int | None = None
     """Beyond the paper: append the PCA normal of this many neighbours to the X normals (X + 1, with its height
     map), so that the network sees a wide-neighbourhood fit where MFPS's fitting patches are wrong on smooth,
-    curved surfaces (benchmarks/results/smooth_surface.md). None: the paper's X normals."""
+    curved surfaces (studies/README.md). None: the paper's X normals."""
     jet_k: int | None = None
     """Beyond the paper: append the degree-2 jet normal of this many neighbours after it (X + 1): on curved smooth
     surfaces a jet follows the curvature that biases a wide PCA fit. None: no jet normal."""
@@ -450,7 +450,7 @@ class DenoiseConfig:
     radius: float = 0.01
     """Ball radius of the fixed neighbourhoods N_i, in l_d. The update shrinks curved surfaces by about
     (1 - lambda) r^2 / 12 per unit curvature and step, so a small ball is better where the cloud is dense enough
-    (benchmarks/results/denoise_radius.md)."""
+    (studies/results/denoise_radius.md)."""
     poisson_depth: int = 8
     """Octree depth of the screened Poisson reconstruction (open3d)."""
 

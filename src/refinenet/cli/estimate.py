@@ -54,14 +54,14 @@ def min_points(params: Params, method: str, refine_initial: bool) -> int:
 def noise_limit(params: Params) -> float:
     """The relative noise (`estimators.strata.relative_noise`) a stratum may have: the largest test noise of the
     benchmark (BigNoise's 0.5% of the diagonal at the training density). The training's largest, 0.3%, splits
-    clouds that are better whole (benchmarks/results/strata.md)."""
+    clouds that are better whole (studies/results/strata.md)."""
     return max(max(levels) for levels in params.noise.test.values())
 
 
 def auto_strata(points: np.ndarray, release: Release, method: str, refine_initial: bool) -> int:
     """How many interleaved subsets `method` estimates the cloud as: for Refine-Net as many as bring each subset's
     noise within `noise_limit`, the networks' training; 1 for the estimators alone, which are kept as published
-    (MFPS on strata gains at heavy noise and loses at light noise: benchmarks/results/strata.md).
+    (MFPS on strata gains at heavy noise and loses at light noise: studies/results/strata.md).
 
     No stratum has fewer points than a training cloud: the rule is measured up to there, and beyond it a rough
     real surface keeps asking for more (on the street scan rue_madame_28 the relative noise falls by 7% per halving
@@ -83,7 +83,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     `initial` (N, 3) replaces MFPS as the normals Refine-Net refines. `scale` picks l_d: the point spacing
     calibrated on the training clouds, or the paper's bounding-box diagonal. `n_strata` interleaved subsets are
     estimated on their own (None: `auto_strata`'s choice), then reconciled by `estimators.strata.consensus` unless
-    `reconcile` is False (benchmarks/strata.py compares both).
+    `reconcile` is False (studies/strata.py compares both).
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r} (one of {', '.join(METHODS)})")
