@@ -31,7 +31,8 @@ from refinenet.geometry.ball import random_ball_subsets
 from refinenet.network.dataset import PreparedCloud
 from refinenet.network.model import RefineNet, architecture
 from refinenet.network.training import cluster_data
-from refinenet.pipeline.workflow import CLOUD, FEATURES, FULL
+from refinenet.pipeline.layout import CLOUD, FEATURES
+from refinenet.pipeline.methods import FULL
 
 RESULTS = Path(__file__).parent / "results"
 

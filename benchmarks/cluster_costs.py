@@ -42,7 +42,10 @@ from machine import write_results  # noqa: E402
 from pipeline_report import job_benchmarks  # noqa: E402
 
 from refinenet import config  # noqa: E402
-from refinenet.pipeline.workflow import FULL, HISTORY_DIR, MODEL_DIR, Pipeline, clouds, gpus  # noqa: E402
+from refinenet.pipeline.layout import HISTORY_DIR, MODEL_DIR  # noqa: E402
+from refinenet.pipeline.methods import FULL  # noqa: E402
+from refinenet.pipeline.steps import gpus  # noqa: E402
+from refinenet.pipeline.workflow import Pipeline, clouds  # noqa: E402
 
 #: Rules whose jobs each read one cloud: cost proportional to its points.
 PER_CLOUD = ("clouds_train", "clouds_test", "mfps", "mfps_train", "baselines", "features", "inference")
@@ -157,7 +160,7 @@ def _largest_share(run: Path) -> float:
 
 def resources(result: dict) -> dict[str, dict[str, int]]:
     """SLURM memory and time per rule, with margins. GPUs are not set here: the rules ask for one from their
-    params' device (`workflow.gpus`), which a static profile could not follow."""
+    params' device (`steps.gpus`), which a static profile could not follow."""
     return {rule: {"mem_mb": max(MIN_MEM_MB, math.ceil((cost["peak_mb"] or MIN_MEM_MB) * MEMORY_MARGIN / 256) * 256),
                    "runtime": max(MIN_MINUTES, math.ceil(cost["seconds_per_job"] * TIME_MARGIN / 60))}
             for rule, cost in result["rules"].items()}

@@ -25,8 +25,9 @@ from pathlib import Path
 import pandas as pd
 from machine import machine_info, write_results
 
+from refinenet.pipeline.methods import FULL
 from refinenet.pipeline.timing import read_benchmark
-from refinenet.pipeline.workflow import FULL, VARIANT_STEPS
+from refinenet.pipeline.variants import VARIANT_STEPS
 
 RESULTS = Path(__file__).parent / "results"
 #: The results' file names: STEM.json (the sections) and STEM.md (their report).

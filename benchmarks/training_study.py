@@ -36,7 +36,8 @@ from refinenet.network.dataset import prepare  # noqa: E402
 from refinenet.network.model import architecture  # noqa: E402
 from refinenet.network.training import HISTORY as HISTORY_FILE  # noqa: E402
 from refinenet.network.training import RESULT, cluster_data, train_cluster  # noqa: E402
-from refinenet.pipeline.workflow import CLOUD, CLUSTER_MODEL, FEATURES, FULL, HISTORY, NETWORK  # noqa: E402
+from refinenet.pipeline.layout import CLOUD, CLUSTER_MODEL, FEATURES, HISTORY, NETWORK  # noqa: E402
+from refinenet.pipeline.methods import FULL  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 #: Every kept experiment: name -> its record and history.

@@ -5,7 +5,9 @@ from refinenet import config
 from refinenet.network.model import architecture
 from refinenet.network.summary import write_architecture
 from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import ARCHITECTURE, ARCHITECTURE_FILES, Pipeline
+from refinenet.pipeline.catalogue import ARCHITECTURE
+from refinenet.pipeline.layout import ARCHITECTURE_FILES
+from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):

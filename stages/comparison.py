@@ -4,7 +4,8 @@
 from refinenet.atomic import write_text
 from refinenet.evaluation.paper import comparison_latex, comparison_markdown, read_tables
 from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import COMPARISON_FILES, TABLES
+from refinenet.pipeline.catalogue import TABLES
+from refinenet.pipeline.layout import COMPARISON_FILES
 
 
 def arguments(parser):

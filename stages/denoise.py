@@ -15,7 +15,8 @@ from refinenet.evaluation.denoise import SURFACE_SAMPLES, point_update, read_rec
 from refinenet.evaluation.metrics import ErrorStats
 from refinenet.evaluation.table import stats_row, write_table
 from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import DENOISE_INPUT, DENOISE_METHODS, DENOISE_NAMES, Table, data_line
+from refinenet.pipeline.captions import data_line
+from refinenet.pipeline.catalogue import DENOISE_INPUT, DENOISE_METHODS, DENOISE_NAMES, Table
 
 #: Distances in the table are in this fraction of l_d.
 UNIT = 1e-3

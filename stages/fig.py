@@ -39,11 +39,16 @@ from refinenet.network.clustering import cloud_clusters, load_cluster_model
 from refinenet.network.inference import load_networks
 from refinenet.network.model import architecture
 from refinenet.network.release import Release
-from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import (
+from refinenet.pipeline import captions, stage
+from refinenet.pipeline.catalogue import (
     CLUSTER_FIGURE_VARIANTS,
     DENOISE_INPUT,
     DENOISE_METHODS,
+    FIGURE_METHODS,
+    REAL_VARIANT,
+    TABLES,
+)
+from refinenet.pipeline.layout import (
     FIGURE_CLUSTERS,
     FIGURE_DENOISE,
     FIGURE_LOSS,
@@ -51,14 +56,9 @@ from refinenet.pipeline.workflow import (
     FIGURE_REAL,
     FIGURE_TRAINING,
     HISTORY,
-    REAL_METHODS,
-    REAL_VARIANT,
-    REFINENET,
-    TABLES,
-    Pipeline,
-    data_line,
-    figure_name,
 )
+from refinenet.pipeline.methods import REFINENET, figure_name
+from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):
@@ -77,13 +77,13 @@ def arguments(parser):
 
 def main(params, args):
     pipe = Pipeline(config.read_raw(args.params), args.params)
-    footer = data_line(params)
+    footer = captions.data_line(params)
     if args.figure == "normals":
         normals_figure(panels(pipe, args.clouds, {m: figure_name(m) for m in pipe.figure_methods()}),
                        footer + f" Unoriented angular error, heat map clipped at {MAX_ERROR:g} deg; "
                        "orthographic view, azimuth 35, elevation 25 deg.", FIGURE_NORMALS)
     elif args.figure == "loss":
-        loss_figure(panels(pipe, args.clouds, pipe.rows(TABLES["table_loss"])),
+        loss_figure(panels(pipe, args.clouds, captions.rows(pipe, TABLES["table_loss"])),
                     footer + " Unoriented angular error of each point under each network.", FIGURE_LOSS)
     elif args.figure == "clusters":
         clusters(pipe, args.clouds[0], args.features, args.clusters, args.sweep, footer)
@@ -121,7 +121,7 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
         labels[f"Kc = {model.n_clusters} ({variant})"] = cloud_clusters(model, features.nf, features.frames)
     table = TABLES["table_clusters"]
     key, _ = table.sweep
-    rows = pipe.rows(table)
+    rows = captions.rows(pipe, table)
     errors = pd.read_csv(sweep_path, index_col=0)["Average/mean"]
     clusters_figure(cloud.points[features.points], labels,
                     ([pipe.swept(m, key) for m in rows], [float(errors[label]) for label in rows.values()]),
@@ -138,7 +138,7 @@ def real(params, folder, training_clouds, cluster_path, network_folders, footer)
     scans = []
     for path in scan_files(folder):
         points = read_scan(path, params.figures.scan_points, params.seed, least)
-        estimates = {METHOD_NAMES[m]: estimate_normals(points, release, m) for m in REAL_METHODS if m != REFINENET}
+        estimates = {METHOD_NAMES[m]: estimate_normals(points, release, m) for m in FIGURE_METHODS if m != REFINENET}
         estimates[f"{METHOD_NAMES[REFINENET]} (X = {params.features.n_normals})"] = estimate_normals(
             points, release, REFINENET, initial=estimates[METHOD_NAMES["mfps"]])
         scans.append(Scan(path.stem, points, estimates))

@@ -11,16 +11,11 @@ import yaml
 from refinenet import config
 from refinenet.atomic import write_text
 from refinenet.evaluation.report import compile_pdf, page, tables_document
-from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import (
-    COMPARISON_FILES,
-    FULL,
-    REPORT_DIR,
-    REPORT_FILES,
-    TABLES_PDF,
-    Pipeline,
-    data_line,
-)
+from refinenet.pipeline import captions, stage
+from refinenet.pipeline.layout import COMPARISON_FILES, REPORT_DIR, REPORT_FILES, TABLES_PDF
+from refinenet.pipeline.methods import FULL
+from refinenet.pipeline.page import reported
+from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):
@@ -32,16 +27,16 @@ def main(params, args):
         compile_pdf(REPORT_FILES["tex"], TABLES_PDF)
         return
     pipe = Pipeline(config.read_raw(args.params), args.params)
-    tables, figures = pipe.reported()
+    tables, figures = reported(pipe)
     settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full)}, sort_keys=False, width=120)
-    changes = {v: pipe.changes(v) for v in pipe.params if v != FULL}
+    changes = {v: captions.changes(pipe, v) for v in pipe.params if v != FULL}
     settings += ("\n# Refine-Net variants: what each changes (reference: full under the variant budget; the others:\n"
                  "# from reference)\n" + yaml.safe_dump(changes, sort_keys=False, width=120))
     title = f"Refine-Net reproduction: reports of profile {params.profile}"
     notes = {"Comparison with the paper": os.path.relpath(COMPARISON_FILES["md"], REPORT_DIR)}
-    write_text(REPORT_FILES["html"], page(title, data_line(params), tables, figures, notes, settings, REPORT_DIR))
-    write_text(REPORT_FILES["tex"], tables_document(f"{title}. {data_line(params)}",
-                                                    [f"{REPORT_DIR}/{t.tex}" for t in tables]))
+    data = captions.data_line(params)
+    write_text(REPORT_FILES["html"], page(title, data, tables, figures, notes, settings, REPORT_DIR))
+    write_text(REPORT_FILES["tex"], tables_document(f"{title}. {data}", [f"{REPORT_DIR}/{t.tex}" for t in tables]))
 
 
 if __name__ == "__main__":

@@ -7,8 +7,9 @@ from refinenet.data.clouds import cloud_key
 from refinenet.data.io import read_cloud
 from refinenet.evaluation.plots import sweep_plot
 from refinenet.evaluation.table import evaluate, write_table
-from refinenet.pipeline import stage
-from refinenet.pipeline.workflow import TABLES, Pipeline, Table
+from refinenet.pipeline import captions, stage
+from refinenet.pipeline.catalogue import TABLES, Table
+from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):
@@ -18,14 +19,14 @@ def arguments(parser):
 
 def main(params, args):
     pipe, table = Pipeline(config.read_raw(args.params), args.params), TABLES[args.table]
-    rows = pipe.rows(table)
+    rows = captions.rows(pipe, table)
     methods = list(rows)
     keys = [cloud_key(path, read_cloud(path)) for path in args.clouds]
     normals = {m: [pipe.normals_path(m, key) for key in keys] for m in methods}
     per_cloud = evaluate(methods, args.clouds, normals, pipe.scored_subset(table.methods))
     files = Table.files(args.table, table)
-    csv = write_table(per_cloud, pipe.protocol(table), table.metrics, pipe.caption(table), args.table, files,
-                      rows)
+    csv = write_table(per_cloud, pipe.protocol(table), table.metrics, captions.caption(pipe, table), args.table,
+                      files, rows)
     if table.sweep:
         key, symbol = table.sweep
         sweep_plot([pipe.swept(m, key) for m in methods], list(csv["Average/mean"]), symbol,

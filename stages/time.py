@@ -6,8 +6,9 @@ from refinenet.data.io import read_cloud
 from refinenet.network.model import architecture
 from refinenet.network.summary import parameters
 from refinenet.pipeline import stage
+from refinenet.pipeline.layout import CLOUD, JOB_BENCHMARK, TIME_FILES
 from refinenet.pipeline.timing import job_rows, time_table, write_time_table
-from refinenet.pipeline.workflow import CLOUD, JOB_BENCHMARK, TIME_FILES, clouds
+from refinenet.pipeline.workflow import clouds
 
 #: Quoted from the paper ([P] table:time), for the caption only.
 PAPER = "2.2 s per 1k points, 10.4M parameters"

@@ -42,11 +42,12 @@ def child(args: argparse.Namespace) -> None:
     import stages.inference
     import stages.training
     from refinenet.allocator import keep_freed_memory
-    from refinenet.pipeline import workflow as wf
+    from refinenet.pipeline import layout
+    from refinenet.pipeline.workflow import Pipeline, clouds
 
     if args.child == "kept" and not keep_freed_memory():
         sys.exit("this C library is not glibc: nothing to compare")
-    pipe = wf.Pipeline(yaml.safe_load((args.run / "params.yaml").read_text()))
+    pipe = Pipeline(yaml.safe_load((args.run / "params.yaml").read_text()))
     params = pipe.params[args.variant]
     features, clusters, networks = (pipe.owner(args.variant, f) for f in ("features", "clustering", "training"))
     out = Path(args.scratch)
@@ -54,20 +55,20 @@ def child(args: argparse.Namespace) -> None:
     if args.stage == "training":
         params = replace(params, training=replace(params.training, max_epochs=args.epochs,
                                                   max_train_points_per_cloud=args.points))
-        keys = [c.key for c in wf.clouds(params, "train")]
+        keys = [c.key for c in clouds(params, "train")]
         stages.training.main(params, argparse.Namespace(
-            cluster=0, threads=1, clouds=[args.run / wf.CLOUD.format(cloud=k) for k in keys],
-            features=[args.run / wf.FEATURES.format(variant=features, cloud=k) for k in keys],
-            clusters=args.run / wf.CLUSTER_MODEL.format(variant=clusters), out=out / "network",
+            cluster=0, threads=1, clouds=[args.run / layout.CLOUD.format(cloud=k) for k in keys],
+            features=[args.run / layout.FEATURES.format(variant=features, cloud=k) for k in keys],
+            clusters=args.run / layout.CLUSTER_MODEL.format(variant=clusters), out=out / "network",
             history=out / "history.csv", checkpoints=out / "checkpoints"))
         result = (out / "history.csv").read_text().splitlines()[-1].rsplit(",", 1)[0]  # the epoch's seconds vary
     else:
         n_clusters = params.clustering.n_clusters
         stages.inference.main(params, argparse.Namespace(
-            cloud=args.run / wf.CLOUD.format(cloud=args.cloud),
-            features=args.run / wf.FEATURES.format(variant=features, cloud=args.cloud),
-            clusters=args.run / wf.CLUSTER_MODEL.format(variant=clusters),
-            networks=[args.run / wf.NETWORK.format(variant=networks, cluster=c) for c in range(n_clusters)],
+            cloud=args.run / layout.CLOUD.format(cloud=args.cloud),
+            features=args.run / layout.FEATURES.format(variant=features, cloud=args.cloud),
+            clusters=args.run / layout.CLUSTER_MODEL.format(variant=clusters),
+            networks=[args.run / layout.NETWORK.format(variant=networks, cluster=c) for c in range(n_clusters)],
             out=out / "refined.normals"))
         result = hashlib.sha256((out / "refined.normals").read_bytes()).hexdigest()
     usage = resource.getrusage(resource.RUSAGE_SELF)

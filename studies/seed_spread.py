@@ -7,7 +7,7 @@ show is that of the profile's own training: measure it on a run whose `variant_b
 so that the seed variants train, infer and score exactly as full does and `reference` is full itself:
 
     # in a clone, params.yaml edited: `variant_budget: {}` in the profiles
-    python -m refinenet.pipeline.workflow      # dvc.yaml for the edited keys, so that DVC records the run
+    python -m refinenet.pipeline.dvc           # dvc.yaml for the edited keys, so that DVC records the run
     snakemake -j2 reports/table_seeds.csv
     python studies/seed_spread.py RUN_DIR
 
@@ -33,7 +33,9 @@ from machine import write_results  # noqa: E402
 from pipeline_report import rule_summary  # noqa: E402
 
 from refinenet.evaluation.table import aggregate  # noqa: E402
-from refinenet.pipeline.workflow import TABLES, Pipeline  # noqa: E402
+from refinenet.pipeline.captions import changes  # noqa: E402
+from refinenet.pipeline.catalogue import TABLES  # noqa: E402
+from refinenet.pipeline.workflow import Pipeline  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 TABLE = "table_seeds"
@@ -46,7 +48,7 @@ def seed_variants(pipe: Pipeline) -> list[str]:
     be the profile's own training's."""
     variants = list(TABLES[TABLE].variants)
     for v in variants:
-        extra = {k: value for k, value in pipe.changes(v).items() if k != "seed"}
+        extra = {k: value for k, value in changes(pipe, v).items() if k != "seed"}
         if extra:
             sys.exit(f"seed_spread: {TABLE}'s variant '{v}' differs from full in more than its seed ({extra}): "
                      "set `variant_budget: {}` in params.yaml's profiles and rerun the table")

@@ -32,7 +32,7 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scratch import different_files, isolated, report_files, sh, smoke_copy  # noqa: E402
 
-from refinenet.pipeline.workflow import MAIN  # noqa: E402
+from refinenet.pipeline.catalogue import MAIN  # noqa: E402
 
 POLL = 0.02
 #: The main job (workflow.MAIN) through each tool: the whole chain, clouds to release, without the ablation variants

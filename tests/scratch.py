@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from refinenet.pipeline.workflow import TIMED_FILES
+from refinenet.pipeline.layout import TIMED_FILES
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -62,7 +62,7 @@ def link_shared(repo: Path) -> None:
             beside.symlink_to(SHARED.resolve())
         return
     set_param(repo, "scans: ../shared/data/scans", "scans: null")
-    sh(repo, sys.executable, "-m", "refinenet.pipeline.workflow")
+    sh(repo, sys.executable, "-m", "refinenet.pipeline.dvc")
 
 
 def report_files(repo: Path) -> dict[str, bytes]:

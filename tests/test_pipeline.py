@@ -26,21 +26,21 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.workflow import (
+from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN
+from refinenet.pipeline.catalogue import TABLES as EVALUATED
+from refinenet.pipeline.layout import (
     CHECKPOINT_DIR,
     CLOUD,
-    DENOISE_TABLE,
-    FULL,
     HISTORY,
-    MAIN,
     NETWORK,
     REFINED,
     REPORT_FILES,
     TABLES_PDF,
     TIME_FILES,
-    Pipeline,
 )
-from refinenet.pipeline.workflow import TABLES as EVALUATED
+from refinenet.pipeline.methods import FULL
+from refinenet.pipeline.page import reported
+from refinenet.pipeline.workflow import Pipeline
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
@@ -127,7 +127,7 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
 def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake):
     """reports/index.html opened from the file system in headless Chromium: every figure loads, every table of the
     run is there with rows, and the tables' LaTeX compiled into one PDF."""
-    tables, figures = PIPELINE.reported()
+    tables, figures = reported(PIPELINE)
     page = open_page(by_snakemake / REPORT_FILES["html"])
     assert page.images == {f.png: "yes" for f in figures}
     assert page.body.get("data-missing-images") == "0"

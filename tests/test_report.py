@@ -10,7 +10,7 @@ from browser import open_page
 from refinenet.errors import InputError, OutputError
 from refinenet.evaluation.report import compile_pdf, html_table, latex_caption, page, tables_document
 from refinenet.evaluation.table import aggregate, to_csv_frame, to_latex
-from refinenet.pipeline.workflow import FigureEntry, TableEntry
+from refinenet.pipeline.page import FigureEntry, TableEntry
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402

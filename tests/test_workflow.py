@@ -10,7 +10,8 @@ import pytest
 import yaml
 
 from refinenet.errors import ParamsError
-from refinenet.pipeline import bridge, workflow
+from refinenet.pipeline import bridge, captions, catalogue, dvc, page, steps, variants, workflow
+from refinenet.pipeline.methods import REFINENET, figure_name, refinenet
 
 REPO = Path(__file__).resolve().parents[1]
 PIPELINE = workflow.Pipeline(yaml.safe_load((REPO / "params.yaml").read_text()))
@@ -42,7 +43,7 @@ def test_local_runs_select_jobs_only_when_a_job_ends(tmp_path):
 
 def test_dvc_yaml_is_generated_from_the_step_declarations():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    assert (REPO / "dvc.yaml").read_text() == workflow.render_dvc_yaml(raw), "run python -m refinenet.pipeline.workflow"
+    assert (REPO / "dvc.yaml").read_text() == dvc.render_dvc_yaml(raw), "run python -m refinenet.pipeline.dvc"
 
 
 def test_a_params_edit_that_drops_a_tracked_key_leaves_dvc_lock_alone_with_one_line(tmp_path, monkeypatch, capsys):
@@ -59,18 +60,18 @@ def test_a_params_edit_that_drops_a_tracked_key_leaves_dvc_lock_alone_with_one_l
     monkeypatch.setattr(bridge, "up_to_date_files", lambda: pytest.fail("recorded against a stale dvc.yaml"))
     assert bridge.main(["record"]) == 0
     err = capsys.readouterr().err
-    assert len(err.splitlines()) == 1 and "python -m refinenet.pipeline.workflow" in err
+    assert len(err.splitlines()) == 1 and "python -m refinenet.pipeline.dvc" in err
     assert not (tmp_path / "dvc.lock").exists()
-    assert workflow.main(["--check"]) == 1
-    assert workflow.main([]) == 0 and workflow.main(["--check"]) == 0
+    assert dvc.main(["--check"]) == 1
+    assert dvc.main([]) == 0 and dvc.main(["--check"]) == 0
     assert "profiles.cpu.variant_budget.training" not in (tmp_path / "dvc.yaml").read_text()
 
 
 def test_dvc_stages_list_profile_overrides_of_their_keys():
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
-    keys = workflow.tracked_keys(raw, STEPS["clouds_test"])
+    keys = steps.tracked_keys(raw, STEPS["clouds_test"])
     assert {"profile", "data", "profiles.smoke.data", "profiles.cpu.data"} <= set(keys)
-    assert "profiles.smoke.data" not in workflow.tracked_keys(raw, STEPS["baselines"])
+    assert "profiles.smoke.data" not in steps.tracked_keys(raw, STEPS["baselines"])
 
 
 def test_every_step_is_one_snakemake_rule_of_the_same_name():
@@ -89,7 +90,7 @@ def test_the_slurm_profile_sizes_existing_rules_and_leaves_gpus_to_the_rules():
     sized = profile["set-resources"]
     assert {"features", "training", "inference"} <= set(sized) <= set(STEPS)
     assert all({"mem_mb", "runtime"} == set(res) for res in sized.values()), sized
-    assert (workflow.gpus("cpu"), workflow.gpus("auto"), workflow.gpus("cuda")) == (0, 1, 1)
+    assert (steps.gpus("cpu"), steps.gpus("auto"), steps.gpus("cuda")) == (0, 1, 1)
 
 
 def test_steps_declare_every_library_module_their_script_imports():
@@ -144,7 +145,7 @@ def test_each_job_command_names_its_own_method_and_table(tmp_path):
     assert len(outs) == len(PIPELINE.keys())
     assert all(cloud == out and (simple == cloud if cloud.startswith("test/") else simple is None)
                for cloud, out, simple in outs)
-    assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(workflow.TABLES)
+    assert sorted(tables.search(c).group(1) for c in commands if "stages.table" in c) == sorted(catalogue.TABLES)
 
 
 #: What Snakemake fills a shell command with when a job runs; any other name is the Snakefile's global, read then.
@@ -188,13 +189,13 @@ def test_a_variant_recomputes_only_the_steps_its_overrides_reach():
     assert PIPELINE.owners["kc2"] == {"features": "full", "clustering": "kc2", "training": "kc2", "inference": "kc2"}
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     raw["variants"]["wide"] = {"features": {"r_f": 0.05}}
-    assert set(workflow.owners(raw, "wide").values()) == {"wide"}
+    assert set(variants.owners(raw, "wide").values()) == {"wide"}
     assert "features_wide" in workflow.Pipeline(raw).steps
     assert {"training_l1", "inference_l1"} <= set(STEPS) and not {"features_l1", "clustering_l1"} & set(STEPS)
     assert STEPS["training_l1"].deps == ("results/clouds/train", "results/features/full/train",
                                          "results/clusters/full")
-    assert "variants.l1.training" in workflow.tracked_keys(raw, STEPS["training_l1"])
-    assert not any(k.startswith("variants") for k in workflow.tracked_keys(raw, STEPS["training"]))
+    assert "variants.l1.training" in steps.tracked_keys(raw, STEPS["training_l1"])
+    assert not any(k.startswith("variants") for k in steps.tracked_keys(raw, STEPS["training"]))
 
 
 def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
@@ -204,29 +205,29 @@ def test_the_tables_of_variants_compare_them_with_full_under_the_same_budget():
     written anywhere, reference is full and trains nothing."""
     assert PIPELINE.owners["reference"] == {"features": "full", "clustering": "full", "training": "reference",
                                             "inference": "reference"}
-    assert workflow.TABLES["table_loss"].methods == (workflow.refinenet("l1"), workflow.refinenet("l2"))
+    assert catalogue.TABLES["table_loss"].methods == (refinenet("l1"), refinenet("l2"))
     for name in ("table_ablation", "table_loss", "table_initial", "table_clusters", "table_seeds"):
-        table = workflow.TABLES[name]
-        assert name == "table_loss" or workflow.refinenet("reference") in table.methods, name
-        assert workflow.REFINENET not in table.methods, name
+        table = catalogue.TABLES[name]
+        assert name == "table_loss" or refinenet("reference") in table.methods, name
+        assert REFINENET not in table.methods, name
         assert PIPELINE.scored_subset(table.methods) == 2500, name
-        caption = PIPELINE.caption(table)
+        caption = captions.caption(PIPELINE, table)
         assert "Every row scored on the same seeded 2500 points" in caption, name
         # The rows were trained as reference is, 2 epochs, not full's 6, whether or not reference is a row.
         assert "<= 2 epochs" in caption and "under the variant budget: training.max_epochs = 2" in caption, name
-    loss = PIPELINE.caption(workflow.TABLES["table_loss"])
+    loss = captions.caption(PIPELINE, catalogue.TABLES["table_loss"])
     assert "l1: nothing (the settings above); l2: training.loss = mse." in loss
-    assert PIPELINE.scored_subset(workflow.TABLES["table_synthetic"].methods) is None
+    assert PIPELINE.scored_subset(catalogue.TABLES["table_synthetic"].methods) is None
     for step in ("training_l1", "training_reference", "training_kc2"):
-        assert "profiles.cpu.variant_budget.training" in workflow.tracked_keys(PIPELINE.raw, STEPS[step]), step
-    assert "profiles.smoke.variant_budget.inference" in workflow.tracked_keys(PIPELINE.raw, STEPS["inference_l1"])
-    assert not any("variant_budget" in k for k in workflow.tracked_keys(PIPELINE.raw, STEPS["training"]))
+        assert "profiles.cpu.variant_budget.training" in steps.tracked_keys(PIPELINE.raw, STEPS[step]), step
+    assert "profiles.smoke.variant_budget.inference" in steps.tracked_keys(PIPELINE.raw, STEPS["inference_l1"])
+    assert not any("variant_budget" in k for k in steps.tracked_keys(PIPELINE.raw, STEPS["training"]))
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     for block in raw["profiles"].values():
         block.pop("variant_budget", None)
     unbudgeted = workflow.Pipeline(raw)
     assert set(unbudgeted.owners["reference"].values()) == {"full"} and "training_reference" not in unbudgeted.steps
-    assert unbudgeted.normals_path(workflow.refinenet("reference"), "test/a") == unbudgeted.normals_path("refinenet",
+    assert unbudgeted.normals_path(refinenet("reference"), "test/a") == unbudgeted.normals_path("refinenet",
                                                                                                         "test/a")
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     raw["variants"]["l1"]["inference"] = {"points": 100}  # against l2's 2,500
@@ -259,10 +260,8 @@ def test_refining_another_estimator_trains_on_its_normals(tmp_path):
     raw["variants"]["mine"] = {"features": {"initial": str(tmp_path)}}
     with pytest.raises(ParamsError, match="table_initial needs the variant 'pca_init'"):
         workflow.Pipeline(raw)
-    tables = dict(workflow.TABLES)
-    tables["table_initial"] = workflow.Table((workflow.refinenet("mine"),), ("mean",), "mine")
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(workflow, "TABLES", tables)
+        patch.setitem(catalogue.TABLES, "table_initial", catalogue.Table((refinenet("mine"),), ("mean",), "mine"))
         pipeline = workflow.Pipeline(raw)
         assert "baselines_train" not in pipeline.steps
         assert pipeline.initial_path("mine", "test/SharpFeature/a") == f"{tmp_path}/test/SharpFeature/a.normals"
@@ -277,7 +276,7 @@ def test_the_pipeline_is_the_same_whichever_profile_is_active():
     when a user switches profile (in smoke kc2 equals full's Kc and is still a step of its own)."""
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     for profile in ("smoke", "paper"):
-        assert workflow.render_dvc_yaml({**raw, "profile": profile}) == workflow.render_dvc_yaml(raw)
+        assert dvc.render_dvc_yaml({**raw, "profile": profile}) == dvc.render_dvc_yaml(raw)
 
 
 def test_a_table_needs_its_variants():
@@ -303,11 +302,11 @@ def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
     assert pipeline.figure_methods()[-2:] == ("refinenet/x8", "refinenet/l1")
     fig = pipeline.steps["fig_normals"]
     assert {"results/normals/refinenet/x8/test", "results/normals/refinenet/l1/test"} <= set(fig.deps)
-    assert {"figures.variants", "variants.x8", "variants.l1"} <= set(workflow.tracked_keys(raw, fig))
-    assert workflow.figure_name("refinenet/l1") == "Refine-Net l1"
+    assert {"figures.variants", "variants.x8", "variants.l1"} <= set(steps.tracked_keys(raw, fig))
+    assert figure_name("refinenet/l1") == "Refine-Net l1"
     raw["figures"]["variants"] = ["nope"]
     with pytest.raises(ParamsError, match="figures.variants.*'nope' is not a variant"):
         workflow.Pipeline(raw)
     raw["figures"].update(variants=[], scans=None)
     pipeline = workflow.Pipeline(raw)
-    assert "fig_real" not in pipeline.steps and "real_scans" not in {f.name for f in pipeline.reported()[1]}
+    assert "fig_real" not in pipeline.steps and "real_scans" not in {f.name for f in page.reported(pipeline)[1]}

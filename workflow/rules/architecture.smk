@@ -7,7 +7,7 @@ rule table_architecture:
     input:
         code=PIPE.steps["table_architecture"].code,
     output:
-        **wf.ARCHITECTURE_FILES,
+        **layout.ARCHITECTURE_FILES,
     params:
         tracked=tracked("table_architecture"),
     log:

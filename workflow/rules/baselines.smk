@@ -10,11 +10,11 @@ for step in PIPE.family("baselines"):
             "{wildcards.method} normals of {wildcards.cloud}"
         input:
             code=step.code,
-            cloud=wf.CLOUD,
+            cloud=layout.CLOUD,
         output:
-            wf.NORMALS,
+            layout.NORMALS,
         wildcard_constraints:
-            method="|".join(wf.BASELINES),
+            method="|".join(BASELINES),
             cloud=rf"{step.split}/[^/]+/[^/]+",
         params:
             tracked=tracked(step.name),

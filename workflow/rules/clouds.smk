@@ -10,7 +10,7 @@ for step in PIPE.family("clouds"):
         input:
             code=step.code,
         output:
-            wf.CLOUD,
+            layout.CLOUD,
         wildcard_constraints:
             cloud=rf"{step.split}/[^/]+/[^/]+",
         params:

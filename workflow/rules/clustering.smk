@@ -10,9 +10,9 @@ for step in PIPE.family("clustering"):
             f"cluster model of {step.variant} (Kc = {PIPE.params[step.variant].clustering.n_clusters})"
         input:
             code=step.code,
-            features=[files(step.variant, "features", wf.FEATURES, cloud=key) for key in TRAIN_KEYS],
+            features=[files(step.variant, "features", layout.FEATURES, cloud=key) for key in TRAIN_KEYS],
         output:
-            wf.CLUSTER_MODEL.format(variant=step.variant),
+            layout.CLUSTER_MODEL.format(variant=step.variant),
         params:
             tracked=tracked(step.name),
             variant=step.variant,

@@ -6,16 +6,20 @@ import shutil
 import sys
 
 from refinenet.errors import RefineNetError
-from refinenet.pipeline import workflow as wf
+from refinenet.pipeline import catalogue, layout
+from refinenet.pipeline.methods import BASELINES, FULL, MFPS_METHODS, REFINENET
+from refinenet.pipeline.page import reported_files
+from refinenet.pipeline.steps import gpus, tracked_params
+from refinenet.pipeline.workflow import Pipeline, check_keys
 
 try:
-    PIPE = wf.Pipeline(config)
+    PIPE = Pipeline(config)
     P = PIPE.full
     CLOUDS = PIPE.clouds
 except RefineNetError as err:
     sys.exit(f"error: {err}")
 
-TEST_CLOUDS = [wf.CLOUD.format(cloud=key) for key in PIPE.keys("test")]
+TEST_CLOUDS = [layout.CLOUD.format(cloud=key) for key in PIPE.keys("test")]
 TRAIN_KEYS = PIPE.keys("train")
 
 
@@ -26,12 +30,12 @@ wildcard_constraints:
 
 def tracked(step):
     """Rule params holding every params key the DVC stage lists, so both tools rerun on the same changes."""
-    return wf.tracked_params(config, PIPE.steps[step])
+    return tracked_params(config, PIPE.steps[step])
 
 
 def files(variant, family, pattern, **values):
     """A per-variant step's file pattern for the variant that owns the step's files (itself or full)."""
-    return wf.fill(pattern, variant=PIPE.owner(variant, family), **values)
+    return layout.fill(pattern, variant=PIPE.owner(variant, family), **values)
 
 
 def record_in_dvc():

@@ -6,9 +6,9 @@ rule paper_comparison:
         "our tables beside the paper's numbers"
     input:
         code=PIPE.steps["paper_comparison"].code,
-        tables=[wf.Table.files(name)["csv"] for name in wf.TABLES],
+        tables=[catalogue.Table.files(name)["csv"] for name in catalogue.TABLES],
     output:
-        **wf.COMPARISON_FILES,
+        **layout.COMPARISON_FILES,
     params:
         tracked=tracked("paper_comparison"),
     log:

@@ -9,16 +9,16 @@ if "denoise" in PIPE.steps:
             "denoise {wildcards.cloud} with the normals of each method"
         input:
             code=PIPE.steps["denoise"].code,
-            cloud=wf.CLOUD,
-            normals=[PIPE.normals_path(m, "{cloud}") for m in wf.DENOISE_METHODS],
+            cloud=layout.CLOUD,
+            normals=[PIPE.normals_path(m, "{cloud}") for m in catalogue.DENOISE_METHODS],
         output:
-            wf.DENOISED,
+            layout.DENOISED,
         params:
             tracked=tracked("denoise"),
         log:
-            wf.fill(wf.JOB_LOG, step="denoise"),
+            layout.fill(layout.JOB_LOG, step="denoise"),
         benchmark:
-            wf.fill(wf.JOB_BENCHMARK, step="denoise"),
+            layout.fill(layout.JOB_BENCHMARK, step="denoise"),
         threads: 1
         conda:
             "../envs/refinenet.yaml"
@@ -31,10 +31,10 @@ if "denoise" in PIPE.steps:
             "table_denoise: distances to the true surface before and after denoising"
         input:
             code=PIPE.steps["table_denoise"].code,
-            clouds=[wf.CLOUD.format(cloud=k) for k in PIPE.denoise_keys()],
-            records=[wf.DENOISED.format(cloud=k) for k in PIPE.denoise_keys()],
+            clouds=[layout.CLOUD.format(cloud=k) for k in PIPE.denoise_keys()],
+            records=[layout.DENOISED.format(cloud=k) for k in PIPE.denoise_keys()],
         output:
-            **wf.Table.files(wf.DENOISE_TABLE),
+            **catalogue.Table.files(catalogue.DENOISE_TABLE),
         params:
             tracked=tracked("table_denoise"),
         log:

@@ -11,17 +11,17 @@ for step in PIPE.family("features"):
             f"features ({step.variant}) of {{wildcards.cloud}}"
         input:
             code=step.code,
-            cloud=wf.CLOUD,
+            cloud=layout.CLOUD,
             initial=PIPE.initial_path(step.variant, "{cloud}"),
         output:
-            wf.fill(wf.FEATURES, variant=step.variant),
+            layout.fill(layout.FEATURES, variant=step.variant),
         params:
             tracked=tracked(step.name),
             variant=step.variant,
         log:
-            wf.fill(wf.JOB_LOG, step=f"features/{step.variant}"),
+            layout.fill(layout.JOB_LOG, step=f"features/{step.variant}"),
         benchmark:
-            wf.fill(wf.JOB_BENCHMARK, step=f"features/{step.variant}"),
+            layout.fill(layout.JOB_BENCHMARK, step=f"features/{step.variant}"),
         threads: 1
         priority: lambda wildcards: split_priority(wildcards.cloud.split("/")[0])
         conda:

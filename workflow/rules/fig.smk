@@ -7,10 +7,10 @@ rule fig_normals:
         "fig_normals: normals and error maps"
     input:
         code=PIPE.steps["fig_normals"].code,
-        clouds=[wf.CLOUD.format(cloud=key) for key in PIPE.figure_keys()],
+        clouds=[layout.CLOUD.format(cloud=key) for key in PIPE.figure_keys()],
         normals=[PIPE.normals_path(m, key) for m in PIPE.figure_methods() for key in PIPE.figure_keys()],
     output:
-        **wf.FIGURE_NORMALS,
+        **layout.FIGURE_NORMALS,
     params:
         tracked=tracked("fig_normals"),
     log:
@@ -31,12 +31,12 @@ rule fig_clusters:
         "fig_clusters: clusters and the Kc curve"
     input:
         code=PIPE.steps["fig_clusters"].code,
-        cloud=wf.CLOUD.format(cloud=PIPE.figure_keys()[0]),
-        features=files(wf.FULL, "features", wf.FEATURES, cloud=PIPE.figure_keys()[0]),
-        clusters=[files(v, "clustering", wf.CLUSTER_MODEL) for v in wf.CLUSTER_FIGURE_VARIANTS],
-        sweep=wf.Table.files("table_clusters")["csv"],
+        cloud=layout.CLOUD.format(cloud=PIPE.figure_keys()[0]),
+        features=files(FULL, "features", layout.FEATURES, cloud=PIPE.figure_keys()[0]),
+        clusters=[files(v, "clustering", layout.CLUSTER_MODEL) for v in catalogue.CLUSTER_FIGURE_VARIANTS],
+        sweep=catalogue.Table.files("table_clusters")["csv"],
     output:
-        **wf.FIGURE_CLUSTERS,
+        **layout.FIGURE_CLUSTERS,
     params:
         tracked=tracked("fig_clusters"),
     log:
@@ -58,10 +58,14 @@ rule fig_loss:
         "fig_loss: L1 against L2 per point"
     input:
         code=PIPE.steps["fig_loss"].code,
-        clouds=[wf.CLOUD.format(cloud=key) for key in PIPE.loss_figure_keys()],
-        normals=[PIPE.normals_path(m, key) for m in wf.TABLES["table_loss"].methods for key in PIPE.loss_figure_keys()],
+        clouds=[layout.CLOUD.format(cloud=key) for key in PIPE.loss_figure_keys()],
+        normals=[
+            PIPE.normals_path(m, key)
+            for m in catalogue.TABLES["table_loss"].methods
+            for key in PIPE.loss_figure_keys()
+        ],
     output:
-        **wf.FIGURE_LOSS,
+        **layout.FIGURE_LOSS,
     params:
         tracked=tracked("fig_loss"),
     log:
@@ -83,12 +87,12 @@ rule fig_training:
     input:
         code=PIPE.steps["fig_training"].code,
         histories=[
-            wf.HISTORY.format(variant=v, cluster=c)
+            layout.HISTORY.format(variant=v, cluster=c)
             for v in PIPE.trained
             for c in range(PIPE.params[v].clustering.n_clusters)
         ],
     output:
-        [wf.FIGURE_TRAINING.format(variant=v) for v in PIPE.trained],
+        [layout.FIGURE_TRAINING.format(variant=v) for v in PIPE.trained],
     params:
         tracked=tracked("fig_training"),
     log:
@@ -112,14 +116,14 @@ if "fig_real" in PIPE.steps:
         input:
             code=PIPE.steps["fig_real"].code,
             scans=PIPE.full.figures.scans,
-            clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-            clusters=files(wf.REAL_VARIANT, "clustering", wf.CLUSTER_MODEL),
+            clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+            clusters=files(catalogue.REAL_VARIANT, "clustering", layout.CLUSTER_MODEL),
             networks=[
-                files(wf.REAL_VARIANT, "training", wf.NETWORK, cluster=c)
-                for c in range(PIPE.params[wf.REAL_VARIANT].clustering.n_clusters)
+                files(catalogue.REAL_VARIANT, "training", layout.NETWORK, cluster=c)
+                for c in range(PIPE.params[catalogue.REAL_VARIANT].clustering.n_clusters)
             ],
         output:
-            **wf.FIGURE_REAL,
+            **layout.FIGURE_REAL,
         params:
             tracked=tracked("fig_real"),
         log:
@@ -142,10 +146,10 @@ if "fig_denoise" in PIPE.steps:
             "fig_denoise: denoised points and surfaces"
         input:
             code=PIPE.steps["fig_denoise"].code,
-            cloud=wf.CLOUD.format(cloud=PIPE.denoise_figure_key()),
-            record=wf.DENOISED.format(cloud=PIPE.denoise_figure_key()),
+            cloud=layout.CLOUD.format(cloud=PIPE.denoise_figure_key()),
+            record=layout.DENOISED.format(cloud=PIPE.denoise_figure_key()),
         output:
-            **wf.FIGURE_DENOISE,
+            **layout.FIGURE_DENOISE,
         params:
             tracked=tracked("fig_denoise"),
         log:

@@ -10,25 +10,25 @@ for step in PIPE.family("inference"):
             f"Refine-Net ({step.variant}) normals of {{wildcards.cloud}}"
         input:
             code=step.code,
-            cloud=wf.CLOUD,
-            features=files(step.variant, "features", wf.FEATURES),
-            clusters=files(step.variant, "clustering", wf.CLUSTER_MODEL),
+            cloud=layout.CLOUD,
+            features=files(step.variant, "features", layout.FEATURES),
+            clusters=files(step.variant, "clustering", layout.CLUSTER_MODEL),
             networks=[
-                files(step.variant, "training", wf.NETWORK, cluster=c)
+                files(step.variant, "training", layout.NETWORK, cluster=c)
                 for c in range(PIPE.params[step.variant].clustering.n_clusters)
             ],
         output:
-            wf.fill(wf.REFINED, variant=step.variant),
+            layout.fill(layout.REFINED, variant=step.variant),
         params:
             tracked=tracked(step.name),
             variant=step.variant,
         log:
-            wf.fill(wf.JOB_LOG, step=f"inference/{step.variant}"),
+            layout.fill(layout.JOB_LOG, step=f"inference/{step.variant}"),
         benchmark:
-            wf.fill(wf.JOB_BENCHMARK, step=f"inference/{step.variant}"),
+            layout.fill(layout.JOB_BENCHMARK, step=f"inference/{step.variant}"),
         threads: 1
         resources:
-            gpu=wf.gpus(PIPE.params[step.variant].inference.device),
+            gpu=gpus(PIPE.params[step.variant].inference.device),
         conda:
             "../envs/refinenet.yaml"
         shell:

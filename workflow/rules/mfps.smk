@@ -4,7 +4,7 @@
 # runs, after the loop has ended, so what differs between the steps reaches it as a param.
 
 for step in PIPE.family("mfps"):
-    methods = [m for m in wf.MFPS_METHODS if PIPE.normals_dir(m, step.split) in step.outs]
+    methods = [m for m in MFPS_METHODS if PIPE.normals_dir(m, step.split) in step.outs]
     simple_out = f"--simple-out {PIPE.normals_path('simple_mfps', '{cloud}')}" if "simple_mfps" in methods else ""
 
     rule:
@@ -14,7 +14,7 @@ for step in PIPE.family("mfps"):
             f"{' and '.join(methods)} normals of {{wildcards.cloud}}"
         input:
             code=step.code,
-            cloud=wf.CLOUD,
+            cloud=layout.CLOUD,
         output:
             **{m: PIPE.normals_path(m, "{cloud}") for m in methods},
         wildcard_constraints:
@@ -23,9 +23,9 @@ for step in PIPE.family("mfps"):
             tracked=tracked(step.name),
             simple_out=simple_out,
         log:
-            wf.fill(wf.JOB_LOG, step=step.name),
+            layout.fill(layout.JOB_LOG, step=step.name),
         benchmark:
-            wf.fill(wf.JOB_BENCHMARK, step=step.name),
+            layout.fill(layout.JOB_BENCHMARK, step=step.name),
         threads: 1
         priority: split_priority(step.split)
         conda:

@@ -7,13 +7,13 @@ rule release:
         "export the trained networks as the release of profile {P.profile}"
     input:
         code=PIPE.steps["release"].code,
-        clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-        clusters=wf.CLUSTER_MODEL.format(variant=wf.FULL),
-        networks=[wf.NETWORK.format(variant=wf.FULL, cluster=c) for c in range(P.clustering.n_clusters)],
-        check_clouds=[wf.CLOUD.format(cloud=key) for key in wf.check_keys(P)],
-        check_features=[wf.FEATURES.format(variant=wf.FULL, cloud=key) for key in wf.check_keys(P)],
+        clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+        clusters=layout.CLUSTER_MODEL.format(variant=FULL),
+        networks=[layout.NETWORK.format(variant=FULL, cluster=c) for c in range(P.clustering.n_clusters)],
+        check_clouds=[layout.CLOUD.format(cloud=key) for key in check_keys(P)],
+        check_features=[layout.FEATURES.format(variant=FULL, cloud=key) for key in check_keys(P)],
     output:
-        directory(wf.RELEASE),
+        directory(layout.RELEASE),
     params:
         tracked=tracked("release"),
     log:

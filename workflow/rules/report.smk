@@ -7,9 +7,9 @@ rule report:
         "report: reports/index.html and reports/tables.tex"
     input:
         code=PIPE.steps["report"].code,
-        reported=PIPE.reported_files(),
+        reported=reported_files(PIPE),
     output:
-        **wf.REPORT_FILES,
+        **layout.REPORT_FILES,
     params:
         tracked=tracked("report"),
     log:
@@ -27,9 +27,9 @@ rule report_pdf:
         "report_pdf: reports/tables.pdf"
     input:
         code=PIPE.steps["report_pdf"].code,
-        tex=wf.REPORT_FILES["tex"],
+        tex=layout.REPORT_FILES["tex"],
     output:
-        wf.TABLES_PDF,
+        layout.TABLES_PDF,
     params:
         tracked=tracked("report_pdf"),
     log:

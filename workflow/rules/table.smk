@@ -2,7 +2,7 @@
 # table's metrics record (docs/algorithm.md §12). The loop variable reaches the shell command as a param
 # (the command is formatted when the job runs, after the loop has ended).
 
-for name, table in wf.TABLES.items():
+for name, table in catalogue.TABLES.items():
 
     rule:
         name:
@@ -14,7 +14,7 @@ for name, table in wf.TABLES.items():
             clouds=TEST_CLOUDS,
             normals=[PIPE.normals_path(m, key) for m in table.methods for key in PIPE.keys("test")],
         output:
-            **wf.Table.files(name, table),
+            **catalogue.Table.files(name, table),
         params:
             tracked=tracked(name),
             table=name,

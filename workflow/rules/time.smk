@@ -9,10 +9,10 @@ rule table_time:
         code=PIPE.steps["table_time"].code,
         clouds=TEST_CLOUDS,
         timed=[path for key in PIPE.keys("test") for path in (PIPE.normals_path("mfps", key),
-                                                               wf.FEATURES.format(variant=wf.FULL, cloud=key),
-                                                               PIPE.normals_path(wf.REFINENET, key))],
+                                                               layout.FEATURES.format(variant=FULL, cloud=key),
+                                                               PIPE.normals_path(REFINENET, key))],
     output:
-        **wf.TIME_FILES,
+        **layout.TIME_FILES,
     params:
         tracked=tracked("table_time"),
     log:

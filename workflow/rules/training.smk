@@ -12,16 +12,16 @@ for step in PIPE.family("training"):
             f"train the network of cluster {{wildcards.cluster}} ({step.variant})"
         input:
             code=step.code,
-            clouds=[wf.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-            features=[files(step.variant, "features", wf.FEATURES, cloud=key) for key in TRAIN_KEYS],
-            clusters=files(step.variant, "clustering", wf.CLUSTER_MODEL),
+            clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+            features=[files(step.variant, "features", layout.FEATURES, cloud=key) for key in TRAIN_KEYS],
+            clusters=files(step.variant, "clustering", layout.CLUSTER_MODEL),
         output:
-            network=directory(wf.fill(wf.NETWORK, variant=step.variant)),
-            history=wf.fill(wf.HISTORY, variant=step.variant),
+            network=directory(layout.fill(layout.NETWORK, variant=step.variant)),
+            history=layout.fill(layout.HISTORY, variant=step.variant),
         params:
             tracked=tracked(step.name),
             variant=step.variant,
-            checkpoints=wf.CHECKPOINT_DIR.format(variant=step.variant),
+            checkpoints=layout.CHECKPOINT_DIR.format(variant=step.variant),
         log:
             f"logs/training/{step.variant}/cluster_{{cluster}}.log",
         benchmark:
@@ -30,7 +30,7 @@ for step in PIPE.family("training"):
         priority:  # bound per variant: a bare `step` would be the loop's last when Snakemake calls it
             lambda wildcards, kc=PIPE.params[step.variant].clustering.n_clusters: 1 + kc - int(wildcards.cluster)
         resources:
-            gpu=wf.gpus(PIPE.params[step.variant].training.device),
+            gpu=gpus(PIPE.params[step.variant].training.device),
         conda:
             "../envs/refinenet.yaml"
         shell:

@@ -27,7 +27,7 @@ from refinenet.evaluation.table import latex_escape
 
 
 class TableEntry(Protocol):
-    """A table of the page (`pipeline.workflow.TableEntry`): its CSV is rendered, its LaTeX gives the caption."""
+    """A table of the page (`pipeline.page.TableEntry`): its CSV is rendered, its LaTeX gives the caption."""
 
     name: str
     csv: str
@@ -36,7 +36,7 @@ class TableEntry(Protocol):
 
 
 class FigureEntry(Protocol):
-    """A figure of the page (`pipeline.workflow.FigureEntry`): the PNG shown, what it shows, the files to link."""
+    """A figure of the page (`pipeline.page.FigureEntry`): the PNG shown, what it shows, the files to link."""
 
     name: str
     png: str

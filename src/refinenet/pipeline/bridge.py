@@ -22,7 +22,9 @@ from pathlib import Path
 
 from refinenet import config
 from refinenet.errors import ParamsError, RefineNetError
-from refinenet.pipeline.workflow import REGENERATE, Pipeline, Step, dvc_yaml_is_current
+from refinenet.pipeline.dvc import REGENERATE, dvc_yaml_is_current
+from refinenet.pipeline.steps import Step
+from refinenet.pipeline.workflow import Pipeline
 
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", "workflow/Snakefile"]
 
