@@ -1,6 +1,8 @@
 """params.yaml: profiles resolve as documented, and every invalid value is reported by its key."""
 
 import copy
+import dataclasses
+import typing
 from pathlib import Path
 
 import pytest
@@ -84,16 +86,57 @@ def test_params_load_into_typed_blocks_from_any_working_directory(tmp_path, monk
 @pytest.mark.parametrize(
     ("key", "value", "message"),
     [
-        ("features.hmp_size", 6, "features: hmp_size must be a positive odd number"),
-        ("mfps.scales", [100, 50], "mfps: MFPSConfig.scales: must be distinct and increasing"),
-        ("features.initial", "pcpnet", "features: initial 'pcpnet' is neither one of ('mfps', 'pca', 'jet') nor an "
+        ("features.hmp_size", 6, "features.hmp_size: must be odd (a centre bin), got 6"),
+        ("mfps.scales", [100, 50], "mfps.scales: must be increasing, got [100, 50]"),
+        ("mfps.scales", [50, 50], "mfps.scales: must be increasing, got [50, 50]"),
+        ("features.initial", "pcpnet", "features.initial: 'pcpnet' is neither one of ('mfps', 'pca', 'jet') nor an "
                                        "existing folder"),
     ],
 )
-def test_values_the_schema_cannot_judge_name_their_block(key, value, message):
+def test_values_the_schema_cannot_judge_name_their_key(key, value, message):
     with pytest.raises(ParamsError) as info:
         config.Params.from_resolved(resolve(with_value(key, value)))
-    assert str(info.value) == f"params.yaml: {message}" or message in str(info.value)
+    assert str(info.value) == f"params.yaml: {message}"
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "message"),
+    [
+        ("training.batch_size", 1, "training.batch_size: 1 is less than the minimum of 2"),
+        ("features.hmp_size", 3, "features.hmp_size: 3 is less than the minimum of 5"),
+        ("features.r_f", 0, "features.r_f: 0 is less than or equal to the minimum of 0"),
+        ("mfps.theta_t", 95, "mfps.theta_t: 95 is greater than the maximum of 90"),
+        ("patches.mode", "grid", "patches.mode: 'grid' is not one of ['knn', 'ball']"),
+        ("figures.scan_points", 199, "figures.scan_points: 199 is less than the minimum of 200"),
+    ],
+)
+def test_a_bound_has_one_source_and_one_message(key, value, message):
+    """The schema holds every range and choice: params that skip `resolve` (a release's) get its message too."""
+    with pytest.raises(ParamsError) as checked:
+        resolve(with_value(key, value))
+    unchecked = resolve(RAW)
+    block, field = key.split(".")
+    unchecked[block][field] = value
+    with pytest.raises(ParamsError) as built:
+        config.Params.from_resolved(unchecked)
+    assert str(checked.value) == str(built.value) == f"params.yaml: {message}"
+
+
+def test_a_missing_block_is_named():
+    params = resolve(RAW)
+    del params["denoise"]
+    with pytest.raises(ParamsError, match="^release: denoise: is missing$"):
+        config.Params.from_resolved(params, "release")
+
+
+def test_only_method_constants_and_per_job_values_have_defaults():
+    """params.yaml holds every value: a field with a default is a constant of MFPS or set per job (seeds, threads)."""
+    blocks = [t for t in typing.get_type_hints(config.Params).values() if dataclasses.is_dataclass(t)]
+    with_defaults = {(block.__name__, field.name) for block in blocks for field in dataclasses.fields(block)
+                     if field.default is not dataclasses.MISSING}
+    constants = ("beta", "hist_bins", "tv_lambda", "flat_tol", "drop_tol", "seed")
+    assert with_defaults == {("MFPSConfig", name) for name in constants} | {("TrainConfig", "seed"),
+                                                                              ("TrainConfig", "threads")}
 
 
 def test_a_variant_overrides_the_profile_and_only_its_own_keys():

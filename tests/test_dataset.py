@@ -160,5 +160,3 @@ def test_errors(clouds):
         cluster_samples(clouds, 0, val_fraction=1.0)
     with pytest.raises(ValueError, match="inconsistent"):
         PreparedCloud(clouds[0].points[:10], clouds[0].features, clouds[0].clusters)
-    with pytest.raises(ValueError, match="mode"):
-        patch_config(mode="grid")

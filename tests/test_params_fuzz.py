@@ -202,6 +202,24 @@ def test_every_variant_is_valid_until_broken(tmp_path):
         assert config.load(path).profile == name
 
 
+#: The base keys that `config.Params` types: those of one variant's resolved params, such as a release stores.
+TYPED_KEYS = [key for key in BASE_KEYS if key[0] in config.Params.__dataclass_fields__ and key != ("profile",)]
+
+
+@pytest.mark.parametrize("key", TYPED_KEYS, ids=dotted)
+def test_a_value_out_of_range_has_one_message_with_or_without_resolve(key):
+    """The schema is the one source of every range and choice: resolved params built without `resolve` (a release's)
+    report a bad value in the words `resolve` uses."""
+    raw = variant(key, "out of range")
+    with pytest.raises(ParamsError) as checked:
+        config.resolve(raw)
+    unchecked = config.resolve({**RAW, "profile": raw["profile"]})
+    _parent(unchecked, key)[key[-1]] = _parent(raw, key)[key[-1]]
+    with pytest.raises(ParamsError) as built:
+        config.Params.from_resolved(unchecked)
+    assert str(built.value) == str(checked.value)
+
+
 @pytest.mark.parametrize("key", [("training", "lr"), ("profiles", "paper", "features", "r_f")], ids=dotted)
 def test_masked_values_are_reported(tmp_path, key):
     raw = copy.deepcopy(RAW)

@@ -267,7 +267,7 @@ def test_refining_another_estimator_trains_on_its_normals(tmp_path):
         assert pipeline.initial_path("mine", "test/SharpFeature/a") == f"{tmp_path}/test/SharpFeature/a.normals"
         assert pipeline.steps["features_mine"].deps[2:] == (f"{tmp_path}/train", f"{tmp_path}/test")
         raw["variants"]["mine"]["features"]["initial"] = str(tmp_path / "absent")
-        with pytest.raises(ParamsError, match=r"variants\.mine\.features: initial '.*absent' is neither one of"):
+        with pytest.raises(ParamsError, match=r"variants\.mine\.features\.initial: '.*absent' is neither one of"):
             workflow.Pipeline(raw)
 
 

@@ -1,10 +1,11 @@
 """The one typed configuration: every block of params.yaml as a dataclass, composed into `Params`.
 
 params.yaml is the only place that holds the values: no field here has a default (the few constants of a method
-that params.yaml does not expose keep theirs, and the per-job seed and thread count are not params). Loading
-applies the active profile, checks every value against the schema beside this module, which names the dotted
-key of the first bad one in a one-line error (`params.yaml: baselines.pca_k: -3 is less than the minimum of 3`),
-then builds the blocks, whose own checks catch what a schema cannot (e.g. an even height-map size).
+that params.yaml does not expose keep theirs, and the per-job seed and thread count are not params). The schema
+beside this module is the only place of every range and choice: loading applies the active profile, checks every
+value against it, which names the dotted key of the first bad one in a one-line error (`params.yaml:
+baselines.pca_k: -3 is less than the minimum of 3`), then builds the blocks, whose own checks are only those a
+schema cannot express (an even height-map size, scales out of order, a folder of normals that does not exist).
 
 This module sits on the lowest floor with `errors` and `atomic`: each library floor imports its block from
 here, and a stage script loads `Params` without importing the floors it does not use.
@@ -14,7 +15,6 @@ from __future__ import annotations
 
 import copy
 import functools
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -28,15 +28,24 @@ SCHEMA = Path(__file__).with_name("params.schema.yaml")
 #: LibYAML's parser where PyYAML was built with it: the same documents, about ten times faster to read, which every
 #: pipeline job pays for params.yaml and the schema.
 _YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+@functools.cache
+def _schema() -> dict[str, Any]:
+    return yaml.load(SCHEMA.read_text(), Loader=_YAML_LOADER)
+
+
 #: Mappings whose keys are data (categories, list names), replaced whole by an override.
 OPEN_MAPPINGS = frozenset({"test_lists", "test", "variant_budget"})
-LOSSES = ("mse", "l1")
+#: The training losses (the schema's `training.loss`), each of which `network.training` maps to its function.
+LOSSES = tuple(_schema()["properties"]["training"]["properties"]["loss"]["enum"])
 #: The Refine-Net variant that params.yaml describes as written; every other variant overrides it.
 FULL = "full"
 #: Full under `variant_budget`: the Refine-Net row of the tables of variants, trained and scored as they are.
 REFERENCE = "reference"
 #: The blocks a variant may override: those the per-variant steps (features, clustering, training, inference) read.
 VARIANT_BLOCKS = ("seed", "features", "clustering", "network", "patches", "training", "inference")
+
 
 @dataclass(frozen=True)
 class PCPNetLists:
@@ -78,6 +87,10 @@ class NoiseConfig:
     test: dict[str, tuple[float, ...]]
     """Levels of the test shapes, per category."""
 
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "train", tuple(self.train))
+        object.__setattr__(self, "test", {c: tuple(levels) for c, levels in self.test.items()})
+
     def levels(self, split: str, category: str) -> list[float]:
         if split == "train":
             return list(self.train)
@@ -98,7 +111,6 @@ class BaselineConfig:
     """Degree of the fitted jet."""
     big_noise_k: int
     """K of both methods on BigNoise clouds: the paper uses 200 there, 100 elsewhere."""
-
 
 
 @dataclass(frozen=True)
@@ -132,21 +144,8 @@ class MFPSConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scales", tuple(int(k) for k in self.scales))
-        _require(len(self.scales) > 0, "scales", "needs at least one scale")
-        _require(all(k >= 4 for k in self.scales), "scales",
-                 f"each scale needs the centre plus 3 distinct neighbours (k >= 4), got {self.scales}")
-        _require(list(self.scales) == sorted(set(self.scales)), "scales",
-                 f"must be distinct and increasing, got {self.scales}")
-        _require(self.trials >= 1, "trials", f"must be >= 1, got {self.trials}")
-        _require(0.0 < self.theta_t <= 90.0, "theta_t", f"must be in (0, 90] degrees, got {self.theta_t}")
-        _require(self.a_max >= 1, "a_max", f"must be >= 1, got {self.a_max}")
-        _require(self.eta in ("code", "paper"), "eta", f"must be 'code' or 'paper', got {self.eta!r}")
-        _require(0.0 <= self.beta <= 1.0, "beta", f"must be in [0, 1], got {self.beta}")
-        _require(self.hist_bins >= 3, "hist_bins", f"must be >= 3, got {self.hist_bins}")
-        for name in ("tv_lambda", "flat_tol", "drop_tol"):
-            value = getattr(self, name)
-            _require(math.isfinite(value) and value >= 0, name, f"must be finite and >= 0, got {value}")
-        _require(0 <= self.seed < 2**63, "seed", f"must be in [0, 2^63), got {self.seed}")
+        _check(list(self.scales) == sorted(set(self.scales)), "mfps.scales",
+               f"must be increasing, got {list(self.scales)}")
 
     @property
     def k0(self) -> int:
@@ -159,19 +158,14 @@ class MFPSConfig:
         return 3 * self.scales[-1] // 2
 
 
-def _require(ok: bool, field: str, problem: str) -> None:
+def _check(ok: bool, key: str, problem: str) -> None:
+    """A check the schema cannot express, reported under its dotted key (`Params.from_resolved` adds the file)."""
     if not ok:
-        raise ValueError(f"MFPSConfig.{field}: {problem}")
+        raise ParamsError(key, problem)
 
 
-FRAME_MODES = ("canonical", "faithful")
-
-
-HEIGHT_DTYPES = ("float16", "float32")
 #: The estimators whose normals the pipeline computes and Refine-Net can refine (params.yaml `features.initial`).
 INITIAL_ESTIMATORS = ("mfps", "pca", "jet")
-#: The fewest neighbours of the features' jet normal (`FeatureConfig.jet_k`): a degree-2 jet's coefficients.
-JET_MIN_K = 6
 
 
 @dataclass(frozen=True)
@@ -198,18 +192,17 @@ class FeatureConfig:
     heights_dtype: str
     """Storage type of the height maps: float16 halves the cache (heights lie within +-0.3 in units of the extent,
     so the rounding error is at most 1.2e-4); float32 keeps them exact."""
-    initial: str = "mfps"
+    initial: str
     """The normals Refine-Net refines: an estimator of INITIAL_ESTIMATORS (MFPS, the paper's) or a folder holding
-    any other estimator's, `<folder>/<split>/<category>/<name>.normals` per cloud ([P] "PCPNet-ms + Refine-Net").
-    Releases exported before the key existed were trained on MFPS, hence the default."""
-    pca_k: int | None = None
+    any other estimator's, `<folder>/<split>/<category>/<name>.normals` per cloud ([P] "PCPNet-ms + Refine-Net")."""
+    pca_k: int | None
     """Beyond the paper: append the PCA normal of this many neighbours to the X normals (X + 1, with its height
     map), so that the network sees a wide-neighbourhood fit where MFPS's fitting patches are wrong on smooth,
     curved surfaces (studies/README.md). None: the paper's X normals."""
-    jet_k: int | None = None
+    jet_k: int | None
     """Beyond the paper: append the degree-2 jet normal of this many neighbours after it (X + 1): on curved smooth
     surfaces a jet follows the curvature that biases a wide PCA fit. None: no jet normal."""
-    smooth_jet: float | None = None
+    smooth_jet: float | None
     """Beyond the paper: where a degree-2 jet of 100 neighbours fits them within this many times the cloud's noise,
     its normal replaces the initial normal before anything is computed from it (`estimators.smooth_jet`). None:
     the initial normals as they are."""
@@ -217,31 +210,9 @@ class FeatureConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigma_s", tuple(float(s) for s in self.sigma_s))
         object.__setattr__(self, "sigma_r", tuple(float(s) for s in self.sigma_r))
-        if self.initial not in INITIAL_ESTIMATORS and not Path(self.initial).is_dir():
-            raise ValueError(f"initial '{self.initial}' is neither one of {INITIAL_ESTIMATORS} nor an existing folder")
-        if not self.r_f > 0:
-            raise ValueError(f"r_f must be positive, got {self.r_f}")
-        if self.pca_k is not None and self.pca_k < 3:
-            raise ValueError(f"pca_k must be at least 3 (a plane needs 3 points) or None, got {self.pca_k}")
-        if self.jet_k is not None and self.jet_k < JET_MIN_K:
-            raise ValueError(f"jet_k must be at least {JET_MIN_K} (a degree-2 jet has {JET_MIN_K} coefficients) "
-                             f"or None, got {self.jet_k}")
-        if self.smooth_jet is not None and not self.smooth_jet > 0:
-            raise ValueError(f"smooth_jet must be positive or None, got {self.smooth_jet}")
-        for name in ("sigma_s", "sigma_r"):
-            values = getattr(self, name)
-            if not values or any(not s > 0 for s in values):
-                raise ValueError(f"{name} must be a non-empty sequence of positive numbers, got {values}")
-        if self.frame_mode not in FRAME_MODES:
-            raise ValueError(f"frame_mode '{self.frame_mode}' is not one of {FRAME_MODES}")
-        if self.hmp_size < 1 or self.hmp_size % 2 == 0:
-            raise ValueError(f"hmp_size must be a positive odd number (a centre bin), got {self.hmp_size}")
-        if self.hmp_k < 1:
-            raise ValueError(f"hmp_k must be at least 1, got {self.hmp_k}")
-        if self.hmp_extent is not None and not self.hmp_extent > 0:
-            raise ValueError(f"hmp_extent must be positive or None, got {self.hmp_extent}")
-        if self.heights_dtype not in HEIGHT_DTYPES:
-            raise ValueError(f"heights_dtype '{self.heights_dtype}' is not one of {HEIGHT_DTYPES}")
+        _check(self.initial in INITIAL_ESTIMATORS or Path(self.initial).is_dir(), "features.initial",
+               f"'{self.initial}' is neither one of {INITIAL_ESTIMATORS} nor an existing folder")
+        _check(self.hmp_size % 2 == 1, "features.hmp_size", f"must be odd (a centre bin), got {self.hmp_size}")
 
     @property
     def wide_normals(self) -> tuple[tuple[str, int], ...]:
@@ -284,9 +255,6 @@ class NetworkParams:
     of the X input normals, starting from almost the initial normal)."""
 
 
-PATCH_MODES = ("knn", "ball")
-
-
 @dataclass(frozen=True)
 class PatchConfig:
     """The point-module neighbourhood (docs/algorithm.md §6; params.yaml `patches`)."""
@@ -300,30 +268,10 @@ class PatchConfig:
     max_points: int
     """Points per ball patch (ball mode): 300 synthetic and PCPNet, 500 real scans."""
 
-    def __post_init__(self) -> None:
-        if self.mode not in PATCH_MODES:
-            raise ValueError(f"mode '{self.mode}' is not one of {PATCH_MODES}")
-        if self.k < 1:
-            raise ValueError(f"k must be at least 1, got {self.k}")
-        if not self.radius > 0:
-            raise ValueError(f"radius must be positive, got {self.radius}")
-        if self.max_points < 1:
-            raise ValueError(f"max_points must be at least 1, got {self.max_points}")
-
     @property
     def size(self) -> int:
         """Points per patch the network receives: k (knn) or max_points (ball, padded with the centre)."""
         return self.k if self.mode == "knn" else self.max_points
-
-
-OPTIMIZERS = ("sgd", "adam")
-LR_SCHEDULES = ("constant", "cosine")
-
-
-DEVICES = ("auto", "cpu", "cuda")
-#: Precisions of the networks' heavy layers; auto: bfloat16 where the CPU computes it natively
-#: (`network.devices.resolve_precision`).
-PRECISIONS = ("float32", "bfloat16", "auto")
 
 
 @dataclass(frozen=True)
@@ -356,50 +304,20 @@ class TrainConfig:
     """Random subset (drawn once) of each cloud's training points of the cluster, for CPU profiles; None: all."""
     device: str
     """auto (cuda when available), cpu or cuda."""
-    precision: str = "float32"
+    precision: str
     """float32 ([P]) or bfloat16: the forward and backward passes compute in bfloat16 (autocast) while weights and
     optimiser state stay float32, 1.5x faster on a CPU with native bfloat16 (benchmarks/results/training.md);
-    auto picks bfloat16 only there. Beyond the paper. (Releases exported before it existed trained in float32.)"""
-    resample_points: bool = False
+    auto picks bfloat16 only there. Beyond the paper."""
+    resample_points: bool
     """Draw the `max_train_points_per_cloud` subset anew every epoch: as many steps, more of the clouds' points
-    seen (fewer of them shared by two seeds' trainings). Beyond the paper; no effect without a cap. (Releases
-    exported before it existed drew it once.)"""
+    seen (fewer of them shared by two seeds' trainings). Beyond the paper; no effect without a cap."""
+    loader_workers: int
+    """Processes that build batches (patches, frames, height maps) while the network trains; 0: the training
+    process itself. A GPU needs several to stay busy (benchmarks/results/loader.md); results do not depend on it."""
     seed: int = 0
     """Seeds the initial weights, the validation split, the point caps, shuffling, patches and dropout."""
     threads: int | None = None
     """torch CPU threads; None leaves torch's default."""
-    loader_workers: int = 0
-    """Processes that build batches (patches, frames, height maps) while the network trains; 0: the training
-    process itself. A GPU needs several to stay busy (benchmarks/results/loader.md); results do not depend on it."""
-
-    def __post_init__(self) -> None:
-        if self.optimizer not in OPTIMIZERS:
-            raise ValueError(f"optimizer '{self.optimizer}' is not one of {OPTIMIZERS}")
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise ValueError(f"lr_schedule '{self.lr_schedule}' is not one of {LR_SCHEDULES}")
-        if self.loss not in LOSSES:
-            raise ValueError(f"loss '{self.loss}' is not one of {tuple(LOSSES)}")
-        if self.device not in DEVICES:
-            raise ValueError(f"device '{self.device}' is not one of {DEVICES}")
-        if self.precision not in PRECISIONS:
-            raise ValueError(f"precision '{self.precision}' is not one of {PRECISIONS}")
-        if not self.lr > 0:
-            raise ValueError(f"lr must be positive, got {self.lr}")
-        for name in ("momentum", "weight_decay"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be non-negative, got {getattr(self, name)}")
-        for name in ("batch_size", "max_epochs", "patience"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.threads is not None and self.threads < 1:
-            raise ValueError(f"threads must be at least 1 or None, got {self.threads}")
-        if self.loader_workers < 0:
-            raise ValueError(f"loader_workers must be at least 0, got {self.loader_workers}")
-        if not 0.0 < self.val_fraction < 1.0:
-            raise ValueError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-        if self.max_train_points_per_cloud is not None and self.max_train_points_per_cloud < 1:
-            raise ValueError(f"max_train_points_per_cloud must be at least 1 or None, "
-                             f"got {self.max_train_points_per_cloud}")
 
 
 @dataclass(frozen=True)
@@ -410,18 +328,12 @@ class InferenceConfig:
     """Points per network call; bounds the memory of the patches and height maps built for a batch."""
     device: str
     """auto (cuda when torch sees a GPU), cpu or cuda."""
-    precision: str = "float32"
+    precision: str
     """Of the point MLP and height-map convolutions (`model.reduced_precision`): float32, bfloat16, or auto
     (bfloat16 on a CPU with native bfloat16)."""
-    points: int | None = None
+    points: int | None
     """The pipeline's test clouds: refine only a seeded subset of this many points of each, which the tables then
     score (`data.clouds.scored_points`); None: every point. `variant_budget` sets it for the variants."""
-
-    def __post_init__(self) -> None:
-        if self.precision not in PRECISIONS:
-            raise ValueError(f"precision '{self.precision}' is not one of {PRECISIONS}")
-        if self.points is not None and self.points < 1:
-            raise ValueError(f"points must be at least 1 or None, got {self.points}")
 
 
 @dataclass(frozen=True)
@@ -436,42 +348,38 @@ class EvaluationConfig:
 @dataclass(frozen=True)
 class DenoiseConfig:
     """params.yaml `denoise`: the point update of the denoising application (docs/algorithm.md §11) and the surface
-    reconstructed from its result. [P] gives lambda, gamma and the iterations, not sigma nor the ball radius. The
-    defaults are params.yaml's values: `refinenet denoise` uses them, and a release exported before this block
-    existed gets them."""
+    reconstructed from its result. [P] gives lambda, gamma and the iterations, not sigma nor the ball radius;
+    `refinenet denoise` uses a release's values unless told others."""
 
-    iterations: int = 20
-    lam: float = 0.5
+    iterations: int
+    lam: float
     """lambda: weight of the neighbours' own normal directions."""
-    sigma: float = 0.35
+    sigma: float
     """Width of the normal similarity w(n_i, n_j) = exp(-|n_i - n_j|^2 / sigma^2). With sign-aligned unit normals
     |n_i - n_j|^2 = 2 - 2|cos theta|: at 0.35, w = 0.5 at 17 deg and below 0.05 beyond 35 deg, so a neighbour across
     a sharp edge hardly pulls a point off its own face."""
-    radius: float = 0.01
+    radius: float
     """Ball radius of the fixed neighbourhoods N_i, in l_d. The update shrinks curved surfaces by about
     (1 - lambda) r^2 / 12 per unit curvature and step, so a small ball is better where the cloud is dense enough
     (studies/results/denoise_radius.md)."""
-    poisson_depth: int = 8
+    poisson_depth: int
     """Octree depth of the screened Poisson reconstruction (open3d)."""
 
 
 @dataclass(frozen=True)
 class FiguresConfig:
-    """params.yaml `figures`: what the paper's figures show beyond the tables' settings. The defaults show no
-    variant and no scans, so a release exported before this block existed loads."""
+    """params.yaml `figures`: what the paper's figures show beyond the tables' settings."""
 
-    variants: tuple[str, ...] = ()
+    variants: tuple[str, ...]
     """Refine-Net variants shown as columns of the normals figure after Refine-Net (fig_normals)."""
-    scans: str | None = None
+    scans: str | None
     """A folder of real scans for fig_real: point files (`data.io.POINT_FILE_SUFFIXES`) or meshes whose vertices
     are the points; None: no real-scan figure."""
-    scan_points: int | None = None
+    scan_points: int | None
     """A seeded random subset of at most this many points per scan (the smoke profile's small figure)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "variants", tuple(self.variants))
-        if self.scan_points is not None and self.scan_points < 200:
-            raise ValueError(f"scan_points must be at least 200 (a neighbourhood), got {self.scan_points}")
 
 
 @dataclass(frozen=True)
@@ -497,21 +405,21 @@ class Params:
 
     @classmethod
     def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> Params:
-        """Typed blocks from validated, resolved params; a value the schema cannot judge (e.g. an even height-map
-        size) is reported under its block's key."""
-        blocks = {"data": DataConfig, "baselines": BaselineConfig, "mfps": MFPSConfig, "features": FeatureConfig,
-                  "clustering": ClusteringConfig, "network": NetworkParams, "patches": PatchConfig,
-                  "training": TrainConfig, "inference": InferenceConfig, "evaluation": EvaluationConfig,
-                  "denoise": DenoiseConfig, "figures": FiguresConfig}
-        typed: dict[str, Any] = {}
-        for key, block in blocks.items():
-            try:
-                typed[key] = block(**params.get(key, {}))
-            except (TypeError, ValueError) as err:
-                raise ParamsError(key, str(err), source) from None
-        noise = params["noise"]
-        typed["noise"] = NoiseConfig(train=tuple(noise["train"]),
-                                     test={c: tuple(levels) for c, levels in noise["test"].items()})
+        """Typed blocks from resolved params (one variant's, as `resolve` gives them or a release stores them): each
+        block is checked against its part of the schema, then built, which checks what the schema cannot; either
+        reports the first bad value under its dotted key."""
+        blocks = {"data": DataConfig, "noise": NoiseConfig, "baselines": BaselineConfig, "mfps": MFPSConfig,
+                  "features": FeatureConfig, "clustering": ClusteringConfig, "network": NetworkParams,
+                  "patches": PatchConfig, "training": TrainConfig, "inference": InferenceConfig,
+                  "evaluation": EvaluationConfig, "denoise": DenoiseConfig, "figures": FiguresConfig}
+        for key in ("profile", "seed", *blocks):
+            if key not in params:
+                raise ParamsError(key, "is missing", source)
+            validate_block(key, params[key], source)
+        try:
+            typed = {key: block(**params[key]) for key, block in blocks.items()}
+        except ParamsError as err:
+            raise ParamsError(err.key, err.problem, source) from None
         return cls(profile=params["profile"], seed=params["seed"], **typed)
 
 
@@ -604,11 +512,6 @@ def _apply_overrides(resolved: dict[str, Any], overrides: dict[str, Any], where:
         except ParamsError as err:
             raise ParamsError(f"{where}.{err.key}", err.problem, source) from None
     return merged
-
-
-@functools.cache
-def _schema() -> dict[str, Any]:
-    return yaml.load(SCHEMA.read_text(), Loader=_YAML_LOADER)
 
 
 @functools.cache

@@ -10,10 +10,12 @@ gives its points the normals the whole cloud gives them.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from tqdm import tqdm
 
-from refinenet.config import InferenceConfig, Params
+from refinenet.config import Params
 from refinenet.data.noise import bbox_diagonal
 from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
 from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
@@ -108,7 +110,7 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
     tiled_jet = method == "refinenet" and params.features.smooth_jet is not None and len(layout) > 1
     noise = _noise(points, layout, progress) if tiled_jet else None
-    inference = InferenceConfig(batch_size=params.inference.batch_size, device=device)
+    inference = replace(params.inference, device=device)
     normals = np.empty_like(points)
     inner = progress and len(layout) == 1
     for tile in tqdm(layout, desc="tiles", unit="tile", disable=not progress or len(layout) == 1):

@@ -31,8 +31,20 @@ from refinenet.network.training import network_fingerprint
 #: Where the package keeps its shipped release (the pipeline's `release` step writes it).
 SHIPPED = Path(__file__).resolve().parents[1] / "shipped"
 BUNDLE, CARD_JSON, CARD_MD = "networks.pt", "model_card.json", "MODEL_CARD.md"
-#: Format of the bundle; a loader refuses other versions rather than misreading them.
-FORMAT = 1
+#: Format of the bundle (its `format`): from 2, the params hold every setting. A loader upgrades an older format
+#: (`_upgrade`) and refuses a newer one rather than misreading it.
+FORMAT = 2
+#: The settings that a release of format 1 may lack, added to params.yaml after the first of them was exported, with
+#: the value that each such release was trained (or, for `denoise` and `figures`, is used) with; `network.output`
+#: is also that of its network description.
+FORMAT_1 = {
+    "features": {"initial": "mfps", "pca_k": None, "jet_k": None, "smooth_jet": None},
+    "network": {"output": "normal"},
+    "training": {"lr_schedule": "constant", "precision": "float32", "resample_points": False, "loader_workers": 0},
+    "inference": {"precision": "float32", "points": None},
+    "denoise": {"iterations": 20, "lam": 0.5, "sigma": 0.35, "radius": 0.01, "poisson_depth": 8},
+    "figures": {"variants": [], "scans": None, "scan_points": None},
+}
 
 
 @dataclass(frozen=True)
@@ -92,11 +104,6 @@ def export(folder: str | Path, resolved: dict[str, Any], cluster_model: ClusterM
     write_text(folder / CARD_MD, model_card_markdown(card))
 
 
-#: Network settings added after releases were first exported, with the value that every older release implies,
-#: so that a user's exported networks keep loading.
-IMPLIED_NETWORK = {"output": "normal"}
-
-
 def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu", fuse: bool = True,
                  with_networks: bool = True, precision: str = "float32") -> Release:
     """The release in `folder` (default: the shipped one), networks in eval mode on `device` (none without
@@ -111,12 +118,13 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
         card = json.loads((folder / CARD_JSON).read_text())
     except (OSError, RuntimeError, ValueError, EOFError) as err:
         raise InputError(path, f"not a Refine-Net release ({str(err).splitlines()[0]})") from None
-    if not isinstance(bundle, dict) or bundle.get("format") != FORMAT:
-        raise InputError(path, f"not a Refine-Net release of format {FORMAT}")
-    resolved = json.loads(bundle["params"])
-    resolved["network"] = IMPLIED_NETWORK | resolved["network"]
+    version = bundle.get("format") if isinstance(bundle, dict) else None
+    if not isinstance(version, int) or version < 1:
+        raise InputError(path, "not a Refine-Net release (it has no format)")
+    if version > FORMAT:
+        raise InputError(path, f"a release of format {version}, newer than this refinenet reads (1 to {FORMAT})")
+    resolved, stored = _upgrade(json.loads(bundle["params"]), json.loads(bundle["network"]), version)
     params = Params.from_resolved(resolved, str(path))
-    stored = IMPLIED_NETWORK | json.loads(bundle["network"])
     network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()})
     if network_fingerprint(network) != json.dumps(stored, sort_keys=True):
         raise InputError(path, "the network description does not round-trip")
@@ -127,6 +135,14 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
         net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
         networks[int(c)] = for_inference(net.to(device), fuse, precision)
     return Release(params, cluster_model, networks, card)
+
+
+def _upgrade(resolved: dict[str, Any], network: dict[str, Any], version: int) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A release's params and network description, stored in format `version`, as the present format holds them."""
+    if version == 1:
+        resolved = resolved | {block: values | resolved.get(block, {}) for block, values in FORMAT_1.items()}
+        network = FORMAT_1["network"] | network
+    return resolved, network
 
 
 def half_precision_change(clouds: Sequence[tuple[np.ndarray, Features, np.ndarray]], cluster_model: ClusterModel,
@@ -173,7 +189,7 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "## Networks",
         "",
         f"- Architecture: {card['network']['preset']} preset, features {card['network']['features']}, "
-        f"connection {card['network']['connection']}, output {(IMPLIED_NETWORK | card['network'])['output']}; "
+        f"connection {card['network']['connection']}, output {card['network']['output']}; "
         f"X = {card['n_normals']} normals, Kc = {card['n_clusters']} clusters, one network per cluster.",
         f"- Parameters: {card['parameters']['per_cluster']:,} per cluster network, "
         f"{card['parameters']['total']:,} in total; stored in float16, run in float32.",
