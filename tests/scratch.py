@@ -32,6 +32,23 @@ def snakemake(cwd: Path, *args: str) -> subprocess.CompletedProcess:
     return sh(cwd, sys.executable, "-m", "snakemake", *args)
 
 
+def path_without(programs: set[str], shadows: Path) -> str:
+    """The PATH with `programs` not found on it, as on a machine where they are not installed: each folder of the
+    PATH that holds one of them is replaced by a folder under `shadows` of links to its other entries."""
+    folders = []
+    for i, folder in enumerate(os.environ["PATH"].split(os.pathsep)):
+        entries = sorted(Path(folder).iterdir()) if Path(folder).is_dir() else []
+        if any(entry.name in programs for entry in entries):
+            shadow = shadows / str(i)
+            shadow.mkdir(parents=True)
+            for entry in entries:
+                if entry.name not in programs:
+                    (shadow / entry.name).symlink_to(entry)
+            folder = str(shadow)
+        folders.append(folder)
+    return os.pathsep.join(folders)
+
+
 def set_param(repo: Path, old: str, new: str) -> None:
     """Replace the first occurrence of `old` in the copy's params.yaml (which must hold it)."""
     params = repo / "params.yaml"

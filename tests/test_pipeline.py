@@ -1,9 +1,12 @@
 """End to end on the smoke profile: Snakemake and DVC build the same files, each leaves the other nothing
 to do, a params change reruns the same steps in both tools, every file a step writes is one of its declared
 outputs (so nothing a step made is pruned, and DVC caches it), and the real-scan setting X = 8 runs. Minutes,
-so marked slow."""
+so marked slow. Every run here has the programs that steps need beyond the Python environment (pdflatex) hidden
+from its PATH, as on a machine without them, so that the checks are the same on either; one test builds the PDF
+where pdflatex is installed."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -16,7 +19,7 @@ import pytest
 import slurm_cluster
 from browser import open_page
 from kill_anywhere import kill_anywhere, passed
-from scratch import SHARED, isolated, link_shared, set_param, sh, smoke_copy, snakemake
+from scratch import SHARED, isolated, link_shared, path_without, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.data import shapes
@@ -46,7 +49,18 @@ pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
 #: Seconds the uninterrupted smoke run of the main job took, for spreading the kills of the kill-anywhere test.
 LENGTH: dict[str, float] = {}
+#: What Snakemake's default target printed (its log, on stderr) in `by_snakemake`.
+LOG: dict[str, str] = {}
 TABLE = "reports/table_synthetic.csv"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def real_path(tmp_path_factory):
+    """The module's runs on a PATH without the programs that steps need (`NEEDED`); returns the real PATH."""
+    real = os.environ["PATH"]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("PATH", path_without(NEEDED, tmp_path_factory.mktemp("path")))
+        yield real
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +70,7 @@ def by_snakemake(tmp_path_factory):
     began = time.monotonic()
     snakemake(repo, "-j2", "main")
     LENGTH["snakemake"] = time.monotonic() - began
-    snakemake(repo, "-j2")
+    LOG["snakemake"] = snakemake(repo, "-j2").stderr
     return repo
 
 
@@ -86,19 +100,53 @@ def test_snakemake_leaves_dvc_nothing_to_do(by_snakemake):
     # MFPS is built for sharp features: it must beat both baselines there (docs/algorithm.md §2).
     assert table.loc["MFPS", "SharpFeature/mean"] < min(table.loc["PCA", "SharpFeature/mean"],
                                                          table.loc["Jet", "SharpFeature/mean"])
-    assert dvc_changed_stages(by_snakemake) == UNINSTALLED
-    if not UNINSTALLED:
-        assert "didn't change" in sh(by_snakemake, "dvc", "repro").stdout
+    assert dvc_changed_stages(by_snakemake) == SKIPPED
+    repro = sh(by_snakemake, "dvc", "repro", *sorted(STEPS - SKIPPED)).stdout
+    assert "didn't change" in repro and "Running stage" not in repro
+
+
+def test_without_pdflatex_snakemake_skips_report_pdf_saying_so_and_dvc_repro_fails_there(by_snakemake):
+    """Snakemake's default target leaves out the PDF of the tables, with a message; `dvc repro` of every stage
+    cannot leave a stage out: it has nothing to run but report_pdf, and fails there with the one-line error of its
+    stage script, which names what to install."""
+    assert "skipping report_pdf: pdflatex is not installed" in LOG["snakemake"]
+    assert not (by_snakemake / TABLES_PDF).exists()
+    run = subprocess.run(["dvc", "repro"], cwd=by_snakemake, env=isolated(by_snakemake), capture_output=True,
+                         text=True)
+    assert run.returncode != 0
+    assert {line.split("'")[1] for line in run.stdout.splitlines() if line.startswith("Running stage")} == SKIPPED
+    assert ("error: reports/tables.pdf: pdflatex not found: install TeX Live (Debian: texlive-latex-recommended) to "
+            "build it") in run.stdout + run.stderr
+    assert dvc_changed_stages(by_snakemake) == SKIPPED
+
+
+def test_where_pdflatex_is_installed_snakemake_compiles_the_tables_into_one_pdf(by_snakemake, real_path,
+                                                                               monkeypatch):
+    """With the real PATH, the default target has report_pdf left to build, and records it in dvc.lock. The copy
+    is then put back as the run left it (the PDF removed, dvc.lock restored) for the other tests."""
+    if shutil.which("pdflatex", path=real_path) is None:
+        pytest.skip("pdflatex not installed (Debian: apt-get install texlive-latex-recommended); the PDF of the "
+                    "pipeline's tables is not checked")
+    monkeypatch.setenv("PATH", real_path)
+    lock = (by_snakemake / "dvc.lock").read_bytes()
+    try:
+        run = snakemake(by_snakemake, "-j2")
+        assert "skipping" not in run.stderr
+        assert (by_snakemake / TABLES_PDF).read_bytes().startswith(b"%PDF")
+        assert dvc_changed_stages(by_snakemake) == set()
+    finally:
+        (by_snakemake / TABLES_PDF).unlink(missing_ok=True)
+        (by_snakemake / "dvc.lock").write_bytes(lock)
 
 
 def test_snakemake_builds_every_report(by_snakemake):
     # csv, tex, per-cloud csv, metrics record of each table, of table_denoise and of table_time; the sweeps' (Kc,
     # seeds) plots; the architecture table's csv, tex and layers; paper_comparison's md and tex; the normals, clusters,
     # denoising, L1/L2 and real-scan figures' png and pdf, and the training curves of every trained variant; the
-    # page, the LaTeX of every table and its PDF
+    # page and the LaTeX of every table (not its PDF: pdflatex is hidden)
     reports = [p for p in (by_snakemake / "reports").rglob("*") if p.is_file()]
     sweeps = sum(1 for table in EVALUATED.values() if table.sweep)
-    assert len(reports) == 4 * (len(TABLES) + 2) + sweeps + 3 + 2 + 2 * (4 + len(REAL)) + len(PIPELINE.trained) + 3
+    assert len(reports) == 4 * (len(TABLES) + 2) + sweeps + 3 + 2 + 2 * (4 + len(REAL)) + len(PIPELINE.trained) + 2
     time_table = pd.read_csv(by_snakemake / TIME_FILES["csv"], index_col=0)
     assert (time_table["s per 1k points"] > 0).all() and time_table.loc["network", "parameters per cluster"] > 0
 
@@ -125,15 +173,13 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
 
 
 def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake):
-    """reports/index.html opened from the file system in headless Chromium: every figure loads, every table of the
-    run is there with rows, and the tables' LaTeX compiled into one PDF."""
+    """reports/index.html opened from the file system in headless Chromium: every figure loads, and every table of
+    the run is there with rows."""
     tables, figures = reported(PIPELINE)
     page = open_page(by_snakemake / REPORT_FILES["html"])
     assert page.images == {f.png: "yes" for f in figures}
     assert page.body.get("data-missing-images") == "0"
     assert len(page.tables) == len(tables) and min(page.tables) >= 1
-    if shutil.which("pdflatex"):
-        assert (by_snakemake / TABLES_PDF).read_bytes().startswith(b"%PDF")
 
 
 def test_denoising_moves_points_and_measures_the_noisy_input_at_its_noise_level(by_snakemake):
@@ -167,8 +213,10 @@ if not SHARED.is_dir():
     RAW["figures"]["scans"] = None  # as `scratch.link_shared` leaves the copies
 PIPELINE = Pipeline(RAW)
 STEPS = set(PIPELINE.steps)
-#: Steps whose program is missing here: Snakemake's default target skips them, so DVC sees them as not run.
-UNINSTALLED = {name for name, step in PIPELINE.steps.items() if step.needs and not shutil.which(step.needs)}
+#: The programs that steps need beyond the Python environment, hidden from this module's runs (`real_path`).
+NEEDED = {step.needs for step in PIPELINE.steps.values() if step.needs}
+#: The steps that need them: Snakemake's default target skips them, so DVC sees them as not run.
+SKIPPED = {name for name, step in PIPELINE.steps.items() if step.needs}
 MAIN_TABLES = {"table_baselines", "table_synthetic", "table_synthetic_pgp"}
 #: The evaluated tables; `paper_comparison`, which reads their CSV files, names the data and protocol too.
 TABLES = set(EVALUATED)
@@ -228,11 +276,11 @@ def test_a_params_change_reruns_the_same_steps_in_both_tools(by_snakemake, old, 
     set_param(by_snakemake, old, new)
     try:
         rules = snakemake_changed_rules(by_snakemake)
-        assert dvc_changed_stages(by_snakemake) == steps
+        assert dvc_changed_stages(by_snakemake) == steps | SKIPPED
         assert rules == steps
     finally:
         set_param(by_snakemake, new, old)
-    assert dvc_changed_stages(by_snakemake) == set()
+    assert dvc_changed_stages(by_snakemake) == SKIPPED
 
 
 def test_bad_params_value_fails_with_one_line(by_snakemake):
@@ -262,13 +310,16 @@ def trained_files(repo: Path) -> dict[str, bytes]:
 
 @pytest.mark.parametrize("tool", ["snakemake", "dvc"])
 def test_the_trained_networks_survive_the_run_and_are_in_the_dvc_cache(by_snakemake, by_dvc, tool):
-    repo, stages, targets = (by_snakemake, (), ()) if tool == "snakemake" else (by_dvc, BY_DVC, BY_DVC_TARGETS)
+    """Every stage the tool ran: Snakemake's whole run (the skipped steps aside, which `dvc checkout` and `sync` of
+    every stage would report as failed) or DVC's own."""
+    repo, stages, targets = ((by_snakemake, sorted(STEPS - SKIPPED), ()) if tool == "snakemake" else
+                             (by_dvc, BY_DVC, BY_DVC_TARGETS))
     before = trained_files(repo)
     assert any(name.endswith("best.pt") for name in before)
     assert dvc_changed_stages(repo, *stages) == set()
     for name in before:
         (repo / name).unlink()
-    sh(repo, "dvc", "checkout", "--quiet", *(("--with-deps", *stages) if stages else ()))
+    sh(repo, "dvc", "checkout", "--quiet", "--with-deps", *stages)
     assert trained_files(repo) == before
     sh(repo, sys.executable, "-m", "refinenet.pipeline.bridge", "sync", *stages)
     assert "Nothing to be done" in snakemake(repo, "-n", *targets).stdout
@@ -327,14 +378,15 @@ def test_an_inference_only_change_reruns_inference_and_keeps_the_networks(by_sna
         assert refined.stat().st_mtime_ns != stamp
         assert trained_files(by_snakemake) == networks
         # the main job is recorded; the variants' inference (and the tables beside the main job's, and the page,
-        # which shows every setting) remain
+        # which shows every setting) remain, as does the skipped report_pdf
         changed = dvc_changed_stages(by_snakemake)
-        assert family("inference") - {"inference"} <= changed <= (
-            family("inference") | TABLES | {"paper_comparison"} | REAL | REPORT) - {"inference"} - MAIN_TABLES, changed
+        remaining = family("inference") | TABLES | {"paper_comparison"} | REAL | REPORT | SKIPPED
+        assert family("inference") - {"inference"} | SKIPPED <= changed <= remaining - {"inference"} - MAIN_TABLES, \
+            changed
     finally:
         set_param(by_snakemake, "  batch_size: 300\n  device", "  batch_size: 1024\n  device")
     snakemake(by_snakemake, "-j2", "main")
-    assert dvc_changed_stages(by_snakemake) == set()
+    assert dvc_changed_stages(by_snakemake) == SKIPPED
 
 
 def test_dvc_reruns_only_inference_after_an_inference_only_change(by_dvc):
