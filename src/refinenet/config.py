@@ -5,7 +5,8 @@ that params.yaml does not expose keep theirs, and the per-job seed and thread co
 beside this module is the only place of every range and choice: loading applies the active profile, checks every
 value against it, which names the dotted key of the first bad one in a one-line error (`params.yaml:
 baselines.pca_k: -3 is less than the minimum of 3`), then builds the blocks, whose own checks are only those a
-schema cannot express (an even height-map size, scales out of order, a folder of normals that does not exist).
+schema cannot express (an even height-map size, which must be odd; scales out of order; a folder of normals that
+does not exist).
 
 This module sits on the lowest floor with `errors` and `atomic`: each library floor imports its block from
 here, and a stage script loads `Params` without importing the floors it does not use.
