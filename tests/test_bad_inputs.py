@@ -136,7 +136,7 @@ def read_in_process(case: Case, entry: str, folder: Path) -> list:
     if entry == "io.read_normals":
         return [read_normals(path, N_POINTS)]
     if entry == "io.read_cloud (sibling)":
-        return [read_cloud(_companion(folder, case))]
+        return [read_cloud(_companion(folder, case), sibling_normals=True)]
     if entry == "meshes.read_mesh":
         return [read_mesh(path)]
     if entry == "config.load":

@@ -12,7 +12,7 @@ from refinenet.data.io import (
     write_cloud,
     write_normals,
     write_ply,
-    write_xyz_normals,
+    write_points,
 )
 from refinenet.errors import InputError
 
@@ -26,10 +26,12 @@ def cloud():
 
 
 def test_xyz_normals_round_trip(tmp_path, cloud):
+    """PCPNet's pair of files: the `.normals` beside an `.xyz` is read only when asked for (a data source)."""
     points, normals = cloud
-    write_xyz_normals(tmp_path / "shape", points, normals)
-    back = read_cloud(tmp_path / "shape.xyz")
-    np.testing.assert_allclose(back.points, points, atol=1e-8)
+    write_points(tmp_path / "shape.xyz", points, normals)
+    assert read_cloud(tmp_path / "shape.xyz").normals is None
+    back = read_cloud(tmp_path / "shape.xyz", sibling_normals=True)
+    np.testing.assert_array_equal(back.points, points)
     np.testing.assert_allclose(back.normals, normals, atol=1e-7)
 
 
@@ -118,7 +120,8 @@ def test_mismatched_normals_file(tmp_path):
     (tmp_path / "a.xyz").write_text("0 0 0\n1 0 0\n0 1 0\n")
     (tmp_path / "a.normals").write_text("0 0 1\n0 0 1\n")
     with pytest.raises(InputError, match="2 normals for 3 points"):
-        read_cloud(tmp_path / "a.xyz")
+        read_cloud(tmp_path / "a.xyz", sibling_normals=True)
+    assert read_cloud(tmp_path / "a.xyz").normals is None  # a file the user did not name is not read
 
 
 def test_bad_binary_files(tmp_path):
@@ -142,6 +145,50 @@ def test_failed_write_leaves_nothing(tmp_path):
         tmp.write_text("partial")
         raise Boom
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_group_of_outputs_appears_together_or_not_at_all(tmp_path, cloud):
+    """An `.xyz` and its `.normals` are written, then the group fails: neither appears, no temporary is left.
+    Without the failure both appear at the group's end, not before."""
+    from refinenet.atomic import atomic_group, write_text
+    from refinenet.errors import OutputError
+
+    points, normals = cloud
+    out, blocker = tmp_path / "out", tmp_path / "blocker"
+    out.mkdir()
+    blocker.write_text("a file, where a folder would have to be made")
+    with pytest.raises(OutputError, match="blocker"), atomic_group():
+        write_points(out / "a.xyz", points, normals)
+        write_text(blocker / "report.txt", "")
+    assert list(out.iterdir()) == []
+    with atomic_group():
+        write_points(out / "a.xyz", points, normals)
+        assert [p.name for p in out.iterdir() if not p.name.startswith(".")] == []
+    assert sorted(p.name for p in out.iterdir()) == ["a.normals", "a.xyz"]
+
+
+def test_a_signal_during_the_renames_waits_for_their_end(tmp_path, cloud):
+    """A handler that finds the renames `held` defers its signal; it is raised again once both files are there."""
+    import signal
+
+    from refinenet import interrupts
+    from refinenet.atomic import atomic_group
+
+    seen = []
+
+    def handler(signum, _frame):
+        if interrupts.is_held():
+            interrupts.defer(signum)
+            return
+        seen.append(sorted(p.name for p in tmp_path.iterdir()))
+
+    previous = signal.signal(signal.SIGUSR1, handler)
+    try:
+        with atomic_group(committed=lambda: signal.raise_signal(signal.SIGUSR1)):
+            write_points(tmp_path / "a.xyz", *cloud)
+    finally:
+        signal.signal(signal.SIGUSR1, previous)
+    assert seen == [["a.normals", "a.xyz"]]
 
 
 @pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
@@ -172,3 +219,48 @@ def test_a_saved_torch_object_has_the_same_bytes_every_time(tmp_path):
     assert (tmp_path / "a.pt").read_bytes() == first
     assert torch.equal(torch.load(tmp_path / "a.pt", weights_only=True)["weight"], state["weight"])
     assert [p.name for p in tmp_path.iterdir()] == ["a.pt"]
+
+
+def _ply_bytes(rows: np.ndarray, declared: int, props: str = "x y z", binary: bool = True) -> bytes:
+    header = (f"ply\nformat {'binary_little_endian' if binary else 'ascii'} 1.0\nelement vertex {declared}\n"
+              + "".join(f"property float {p}\n" for p in props.split()) + "end_header\n")
+    body = rows.astype("<f4").tobytes() if binary else "".join(" ".join(map(str, r)) + "\n" for r in rows).encode()
+    return header.encode() + body
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_a_short_ply_reports_the_rows_it_holds(tmp_path, binary):
+    path = tmp_path / "short.ply"
+    path.write_bytes(_ply_bytes(np.random.default_rng(1).random((2000, 3)), 2100, binary=binary))
+    with pytest.raises(InputError, match="header declares 2,100 points, the data holds 2,000"):
+        read_cloud(path)
+
+
+def test_placeholder_zero_normals_count_as_absent(tmp_path, cloud):
+    """Many scanners write nx ny nz = 0 for every point; one zero normal among real ones is still an error."""
+    points, normals = cloud
+    (tmp_path / "zeros.ply").write_bytes(_ply_bytes(np.c_[points, np.zeros_like(points)], len(points),
+                                                    "x y z nx ny nz"))
+    back = read_cloud(tmp_path / "zeros.ply")
+    assert back.normals is None and len(back) == len(points)
+    one_zero = normals.copy()
+    one_zero[3] = 0
+    np.save(tmp_path / "one.npy", np.c_[points, one_zero])
+    with pytest.raises(InputError, match="zero-length normal at row 4"):
+        read_cloud(tmp_path / "one.npy")
+
+
+def test_binary_float64_pcd_is_read_exactly(tmp_path, cloud):
+    """As PCL writes it; Open3D's reader would return zeros."""
+    points, normals = cloud
+    points = points + [500_000.0, 5_000_000.0, 0.0]
+    header = ("VERSION 0.7\nFIELDS x y z normal_x normal_y normal_z\nSIZE 8 8 8 8 8 8\nTYPE F F F F F F\n"
+              f"COUNT 1 1 1 1 1 1\nWIDTH {len(points)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(points)}\n"
+              "DATA binary\n")
+    (tmp_path / "pcl.pcd").write_bytes(header.encode() + np.c_[points, normals].astype("<f8").tobytes())
+    back = read_cloud(tmp_path / "pcl.pcd")
+    np.testing.assert_array_equal(back.points, points)
+    np.testing.assert_allclose(back.normals, normals, atol=1e-12)
+    (tmp_path / "short.pcd").write_bytes((tmp_path / "pcl.pcd").read_bytes()[:-100])
+    with pytest.raises(InputError, match=f"declares {len(points)} points, the data holds {len(points) - 3}"):
+        read_cloud(tmp_path / "short.pcd")

@@ -155,7 +155,7 @@ def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -
     """
     meta: dict[str, Any] = {"split": spec.split, "category": spec.category, "name": spec.name, "origin": spec.origin}
     if spec.noise is None:
-        cloud = read_cloud(spec.origin, min_points=min_points)
+        cloud = read_cloud(spec.origin, min_points=min_points, sibling_normals=True)
         if cloud.normals is None:
             raise InputError(spec.origin, "no normals found (give NAME.normals, 6 columns, or normals in the file)")
         pidx = Path(spec.origin).with_suffix(".pidx")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from refinenet.data.io import check_extent, check_file, native_output_captured, reader_failure
+from refinenet.data.io import check_extent, check_file, native_failure, native_output_captured
 from refinenet.errors import InputError
 
 MESH_SUFFIXES = (".off", ".obj", ".ply")
@@ -94,7 +94,7 @@ def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray]:
         mesh = o3d.io.read_triangle_mesh(str(path), print_progress=False)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.triangles, dtype=np.int64)
-    problem = reader_failure(path, messages)
+    problem = native_failure(path, messages)
     if problem and len(faces) == 0:
         raise InputError(path, f"unreadable mesh ({problem})")
     if path.suffix.lower() == ".ply":
