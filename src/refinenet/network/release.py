@@ -113,28 +113,35 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
     path = folder / BUNDLE
     if not path.is_file():
         raise InputError(path, "no trained networks here (run `snakemake -j2 release` to export a run's)")
-    try:
+    try:  # torch's unpickler can fail on damaged bytes with almost any exception
         bundle = torch.load(path, map_location="cpu", weights_only=True)
         card = json.loads((folder / CARD_JSON).read_text())
-    except (OSError, RuntimeError, ValueError, EOFError) as err:
-        raise InputError(path, f"not a Refine-Net release ({str(err).splitlines()[0]})") from None
+    except Exception as err:  # noqa: BLE001
+        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {_first_line(err)})") from None
     version = bundle.get("format") if isinstance(bundle, dict) else None
     if not isinstance(version, int) or version < 1:
         raise InputError(path, "not a Refine-Net release (it has no format)")
     if version > FORMAT:
         raise InputError(path, f"a release of format {version}, newer than this refinenet reads (1 to {FORMAT})")
-    resolved, stored = _upgrade(json.loads(bundle["params"]), json.loads(bundle["network"]), version)
-    params = Params.from_resolved(resolved, str(path))
-    network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()})
-    if network_fingerprint(network) != json.dumps(stored, sort_keys=True):
-        raise InputError(path, "the network description does not round-trip")
-    cluster_model = ClusterModel(**{k: v.numpy() for k, v in bundle["cluster_model"].items()})
-    networks = {}
-    for c, state in bundle["networks"].items() if with_networks else ():
-        net = RefineNet(network)
-        net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
-        networks[int(c)] = for_inference(net.to(device), fuse, precision)
+    try:  # a file of the right format can still be damaged or foreign inside
+        resolved, stored = _upgrade(json.loads(bundle["params"]), json.loads(bundle["network"]), version)
+        params = Params.from_resolved(resolved, str(path))
+        network = NetworkConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()})
+        if network_fingerprint(network) != json.dumps(stored, sort_keys=True):
+            raise InputError(path, "the network description does not round-trip")
+        cluster_model = ClusterModel(**{k: v.numpy() for k, v in bundle["cluster_model"].items()})
+        networks = {}
+        for c, state in bundle["networks"].items() if with_networks else ():
+            net = RefineNet(network)
+            net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
+            networks[int(c)] = for_inference(net.to(device), fuse, precision)
+    except (KeyError, TypeError, AttributeError, ValueError, RuntimeError) as err:
+        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {_first_line(err)})") from None
     return Release(params, cluster_model, networks, card)
+
+
+def _first_line(err: BaseException) -> str:
+    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
 def _upgrade(resolved: dict[str, Any], network: dict[str, Any], version: int) -> tuple[dict[str, Any], dict[str, Any]]:
