@@ -7,7 +7,9 @@ before they start, and `refinenet --help` answers at once.
 from __future__ import annotations
 
 import argparse
+import math
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -26,13 +28,58 @@ EXAMPLES = """examples:
                                                                  move points along their normals (paper §Application)
   refinenet info                                                 provenance of the shipped networks
 
-Inputs: .xyz/.txt (3 or 6 columns), .ply, .pcd, .npy (N x 3 or N x 6). Outputs by extension: .ply/.pcd with
-normals, .xyz (+ .normals beside it), .txt or .npy (x y z nx ny nz), .normals (normals only).
-Errors are one line, 'error: FILE: PROBLEM', with exit status 2; nothing is written then."""
+Inputs: .xyz/.txt (3 or 6 columns), .ply, .pcd, .npy (N x 3 or N x 6); only the files named are read.
+Outputs by extension (any case): .ply/.pcd with normals, .xyz (+ .normals beside it), .txt or .npy (x y z nx ny
+nz), .normals (normals only); the points go out exactly as they came in. No input is ever written, and an
+existing output is replaced only with --force. Errors are one line, 'error: FILE: PROBLEM', with exit status 2
+(130 or 143 when interrupted by SIGINT or SIGTERM); nothing is written then."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument error in the one line of every other error (argparse would print the usage before it)."""
+
+    def error(self, message: str):
+        print(f"error: {message} (see `{self.prog} --help`)", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _interrupt(signum: int, _frame) -> None:
+    """Stop at once on SIGINT or SIGTERM: remove the temporaries, say so in one line, and exit with 128 + the
+    signal without unwinding, so that no thread of a pool runs on into the interpreter's shutdown. Inside an
+    `interrupts.held` block (the final renames, a native reader) the signal waits for its end."""
+    from refinenet import interrupts
+    from refinenet.atomic import remove_temporaries
+
+    if interrupts.is_held():
+        interrupts.defer(signum)
+        return
+    remove_temporaries()
+    os.write(2, f"error: interrupted by {signal.Signals(signum).name}; nothing was written\n".encode())
+    os._exit(128 + signum)
+
+
+def _written() -> None:
+    """Once every output is in place, a signal ends the command as it ends any program: there is nothing to undo."""
+    for sig in SIGNALS:
+        signal.signal(sig, signal.SIG_DFL)
+
+
+def finite(text: str) -> float:
+    """A float option's value: NaN and infinities are refused where argparse's `float` takes them."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
 
 
 def parser() -> argparse.ArgumentParser:
-    top = argparse.ArgumentParser(prog="refinenet", description=__doc__.split("\n")[0],
+    top = Parser(prog="refinenet", description=__doc__.split("\n")[0],
                                   formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
     commands = top.add_subparsers(dest="command", required=True)
     normals = commands.add_parser("normals", help="estimate the normals of a point cloud",
@@ -47,7 +94,7 @@ def parser() -> argparse.ArgumentParser:
     normals.add_argument("--orient", default="mst", choices=ORIENTATIONS,
                          help="mst: consistent along a minimum spanning tree, outwards on closed shapes (default); "
                               "viewpoint: towards --viewpoint; none: unoriented, as the paper evaluates")
-    normals.add_argument("--viewpoint", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
+    normals.add_argument("--viewpoint", type=finite, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"),
                          help="sensor position for --orient viewpoint (default: the origin)")
     normals.add_argument("--scale", default="spacing", choices=("spacing", "diagonal"),
                          help="length unit of the radii: from the point spacing (default, any size and units) or "
@@ -68,6 +115,7 @@ def parser() -> argparse.ArgumentParser:
                          help="points per spatial tile; larger clouds are processed tile by tile (default 500000)")
     normals.add_argument("--release", metavar="FOLDER", help="a release exported by `snakemake release` "
                                                              "(default: the networks shipped with the package)")
+    normals.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     denoise = commands.add_parser("denoise", help="denoise a point cloud along its normals (docs/algorithm.md §11)",
                                   formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
     denoise.add_argument("input", help="the point cloud, with its normals unless --normals gives them")
@@ -80,15 +128,19 @@ def parser() -> argparse.ArgumentParser:
                             ("sigma", "width of the normal similarity"),
                             ("lam", "lambda, weight of the neighbours' normals"),
                             ("iterations", "point updates"), ("poisson-depth", "octree depth of --surface")):
-        kind = int if name in ("iterations", "poisson-depth") else float
+        kind = int if name in ("iterations", "poisson-depth") else finite
         denoise.add_argument(f"--{name}", type=kind, help=f"{help_text} (default: the release's params)")
     denoise.add_argument("--release", metavar="FOLDER", help="the release whose denoise settings are the defaults")
+    denoise.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     info = commands.add_parser("info", help="print the model card of the shipped networks")
     info.add_argument("--release", metavar="FOLDER", help="another release folder")
     return top
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run a command; every failure a user can cause ends in one line. SIGINT or SIGTERM ends the process at once,
+    even when this is called from Python, with one line and the status 128 + the signal, nothing written. Only a
+    bug of ours prints a traceback."""
     args = parser().parse_args(argv)
     if getattr(args, "threads", 1) < 1:
         return _fail(f"--threads: must be at least 1, got {args.threads}")
@@ -96,10 +148,18 @@ def main(argv: list[str] | None = None) -> int:
         limit_native_threads(args.threads)
     from refinenet.errors import RefineNetError
 
+    handlers = {sig: signal.signal(sig, _interrupt) for sig in SIGNALS}
     try:
         return {"normals": normals, "denoise": denoise, "info": info}[args.command](args)
     except RefineNetError as err:
         return _fail(str(err))
+    except OSError as err:  # one the readers and writers did not name: still the user's file or machine
+        return _fail(f"{err.filename}: {err.strerror}" if err.filename else str(err))
+    except MemoryError:
+        return _fail("out of memory (for a cloud this large, try a smaller --tile-points)")
+    finally:
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
 
 
 def _fail(message: str) -> int:
@@ -126,15 +186,10 @@ def normals(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
+    from refinenet.atomic import atomic_group
     from refinenet.cli.estimate import TILE_POINTS, auto_strata, estimate_normals, min_points
-    from refinenet.data.io import (
-        POINT_FILE_SUFFIXES,
-        check_file,
-        check_output_type,
-        read_cloud,
-        write_points,
-    )
-    from refinenet.errors import InputError, OutputError
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, output_files, read_cloud, write_points
+    from refinenet.errors import InputError
     from refinenet.geometry.orientation import orient_mst, orient_viewpoint
     from refinenet.network.devices import resolve_device, resolve_precision
 
@@ -142,15 +197,13 @@ def normals(args: argparse.Namespace) -> int:
     torch.set_num_threads(args.threads)
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
     output = Path(args.output)
-    check_output_type(output)
-    if output.resolve() == Path(args.input).resolve():
-        raise OutputError(output, "is the input file; choose another output")
+    _check_outputs(args, output_files(output), initial=args.initial)
     if args.initial and args.method != "refinenet":
         raise InputError(args.initial, f"--initial is refined by Refine-Net; it cannot be used with --method "
                                        f"{args.method}")
     if args.tile_points is not None and args.tile_points < 1:
         raise InputError("--tile-points", f"must be at least 1, got {args.tile_points}")
-    if args.strata != "auto" and not (args.strata.isdigit() and int(args.strata) >= 1):
+    if args.strata != "auto" and not (args.strata.isascii() and args.strata.isdigit() and int(args.strata) >= 1):
         raise InputError("--strata", f"must be 'auto' or a whole number of at least 1, got {args.strata!r}")
     try:
         device = resolve_device(args.device)
@@ -176,12 +229,23 @@ def normals(args: argparse.Namespace) -> int:
         result = orient_mst(cloud.points, result)
     elif args.orient == "viewpoint":
         result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
-    write_points(output, cloud.points, result)
+    with atomic_group(_written):
+        write_points(output, cloud.points, result)
     how = f"{precision} features, " if args.method == "refinenet" else ""
     how += f"{n_strata} strata, " if n_strata > 1 else ""
     print(f"{output}: {len(cloud):,} points, {args.method} normals ({how}{args.orient} orientation) in "
           f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
     return 0
+
+
+def _check_outputs(args: argparse.Namespace, writes: list[Path], **reads: str | None) -> None:
+    """`files.check_outputs` for a command's input, its release and the other files named by `reads`."""
+    from refinenet.cli.files import check_outputs, release_files
+    from refinenet.network.release import SHIPPED
+
+    named = {"the input": [args.input], "a file of the release": release_files(args.release or SHIPPED)}
+    named |= {f"the --{option} file": [path] for option, path in reads.items() if path}
+    check_outputs(named, writes, args.force)
 
 
 def _given_normals(path: str, cloud_path: str, n_points: int):
@@ -203,18 +267,27 @@ def denoise(args: argparse.Namespace) -> int:
     """The point update of [P] §Application along the given normals, and optionally the surface of the result."""
     from dataclasses import asdict, replace
 
-    from refinenet.atomic import atomic_path
+    from refinenet.atomic import atomic_group, atomic_path
     from refinenet.config import validate_block
-    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, check_output_type, read_cloud, write_points
+    from refinenet.data.io import (
+        POINT_FILE_SUFFIXES,
+        check_file,
+        native_failure,
+        native_output_captured,
+        output_files,
+        read_cloud,
+        write_points,
+    )
     from refinenet.data.noise import bbox_diagonal
     from refinenet.errors import InputError, OutputError
     from refinenet.evaluation.denoise import point_update, poisson_surface
 
     start = time.perf_counter()
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
-    check_output_type(args.output)
+    writes = output_files(args.output)
     if args.surface and Path(args.surface).suffix.lower() not in (".ply", ".obj"):
         raise OutputError(args.surface, "unsupported surface type (use .ply or .obj)")
+    _check_outputs(args, writes + ([Path(args.surface)] if args.surface else []), normals=args.normals)
     settings = replace(_release(args, with_networks=False).params.denoise,
                        **{k: v for k, v in (("radius", args.radius), ("sigma", args.sigma), ("lam", args.lam),
                                             ("iterations", args.iterations), ("poisson_depth", args.poisson_depth))
@@ -230,14 +303,19 @@ def denoise(args: argparse.Namespace) -> int:
         surface = poisson_surface(points, normals, settings.poisson_depth) if args.surface else None
     except ValueError as err:
         raise InputError(args.normals or args.input, str(err)) from None
-    write_points(args.output, points, normals)
-    if surface is not None:
-        import open3d as o3d
+    with atomic_group(_written):
+        write_points(args.output, points, normals)
+        if surface is not None:
+            import open3d as o3d
 
-        mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(surface[0]), o3d.utility.Vector3iVector(surface[1]))
-        with atomic_path(args.surface) as tmp:
-            if not o3d.io.write_triangle_mesh(str(tmp), mesh):
-                raise OutputError(args.surface, "cannot be written")
+            mesh = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(surface[0]),
+                                             o3d.utility.Vector3iVector(surface[1]))
+            with atomic_path(args.surface) as tmp:
+                with native_output_captured() as messages:  # RPly reports a full disk here, not in the result
+                    written = o3d.io.write_triangle_mesh(str(tmp), mesh)
+                problem = native_failure(tmp, messages)
+                if not written or problem:
+                    raise OutputError(args.surface, f"cannot be written ({problem or 'Open3D failed'})")
     print(f"{args.output}: {len(cloud):,} points denoised ({settings.iterations} updates, radius {settings.radius} "
           f"l_d, sigma {settings.sigma}, lambda {settings.lam}) in {time.perf_counter() - start:.1f} s"
           + (f"; surface {args.surface}: {len(surface[1]):,} triangles" if surface is not None else ""),
