@@ -28,7 +28,7 @@ from functools import cache
 from pathlib import Path
 
 import numpy as np
-from bad_inputs import _directory, _ply_builder, _rows, _six, _unreadable, _xyz, sphere
+from bad_inputs import _directory, _ply_builder, _rows, _six, _unreadable, _xyz, sphere, write_content
 
 from refinenet.network.release import BUNDLE, CARD_JSON, CARD_MD, SHIPPED
 
@@ -111,12 +111,7 @@ def files(contents: dict[str, Content]) -> Callable[[Path], None]:
         for name, content in contents.items():
             path = folder / name
             path.parent.mkdir(parents=True, exist_ok=True)
-            if isinstance(content, bytes):
-                path.write_bytes(content)
-            elif isinstance(content, str):
-                path.write_text(content)
-            else:
-                content(path)
+            write_content(path, content)
     return build
 
 

@@ -68,12 +68,8 @@ class Case:
         """Write the case into `folder` (created) and return the path an entry point is given."""
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / self.name
-        if isinstance(self.content, bytes):
-            path.write_bytes(self.content)
-        elif isinstance(self.content, str):
-            path.write_bytes(self.content.encode())
-        elif self.content is not None:
-            self.content(path)
+        if self.content is not None:
+            write_content(path, self.content)
         return path
 
     @property
@@ -83,6 +79,16 @@ class Case:
 
 
 # ----------------------------------------------------------------------------------------------------------- data
+
+
+def write_content(path: Path, content: bytes | str | Builder) -> None:
+    """Write a case's file: its bytes, its text (UTF-8, as given: no newline translation), or by its builder."""
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif isinstance(content, str):
+        path.write_bytes(content.encode())
+    else:
+        content(path)
 
 
 def _rng(tag: str) -> np.random.Generator:
@@ -239,13 +245,7 @@ def _pcpnet(list_text: str | bytes, shapes: dict[str, dict[str, str | bytes | Bu
         (path.write_bytes if isinstance(list_text, bytes) else path.write_text)(list_text)
         for shape, files in shapes.items():
             for suffix, content in files.items():
-                target = path.parent / f"{shape}{suffix}"
-                if isinstance(content, bytes):
-                    target.write_bytes(content)
-                elif isinstance(content, str):
-                    target.write_text(content)
-                else:
-                    content(target)
+                write_content(path.parent / f"{shape}{suffix}", content)
     return build
 
 
@@ -589,7 +589,8 @@ def table() -> str:
 
 
 def results(junit: Path) -> str:
-    """Outcomes per entry point (test_bad_inputs) and per variant (test_params_fuzz) from a pytest --junitxml file."""
+    """Outcomes per entry point (test_bad_inputs), per variant (test_params_fuzz) and per command and class
+    (test_bad_commands) from a pytest --junitxml file."""
     import xml.etree.ElementTree as ET
 
     def outcome(case: ET.Element) -> str:
@@ -605,10 +606,14 @@ def results(junit: Path) -> str:
     fuzz: dict[str, Counter] = {}
     fuzz_names: list[str] = []
     skips: Counter = Counter()
+    commands: dict[tuple[str, str], Counter] = {}
     other: dict[str, Counter] = {}
     for case in ET.parse(junit).iter("testcase"):
         name, result = case.get("name", ""), outcome(case)
-        if case.get("classname", "").endswith("test_bad_inputs") and "@" in name:
+        if name.startswith("test_command["):
+            entry, command = name[len("test_command["):].split(":", 1)
+            commands.setdefault((entry, command.split("/", 1)[0]), Counter())[result] += 1
+        elif case.get("classname", "").endswith("test_bad_inputs") and "@" in name:
             inputs.setdefault(name.rsplit("@", 1)[1].rstrip("]"), Counter())[result] += 1
             per_case.setdefault(name.split("[", 1)[1].rsplit("@", 1)[0], Counter())[result] += 1
         elif name.startswith("test_a_broken_key_is_named["):
@@ -642,6 +647,15 @@ def results(junit: Path) -> str:
                   f"**{len(fuzz)}** variants = **{keys * len(fuzz)}** broken params files: "
                   f"**{checked}** reported by their key, {sum(skips.values())} skipped "
                   f"({', '.join(f'{n}: {why}' for why, n in skips.items())})."]
+    if commands:
+        lines += ["", "| command | class | cases | " + " | ".join(states) + " |",
+                  "|---|---|---|" + "---|" * len(states)]
+        for (entry, kind), counts in sorted(commands.items()):
+            lines.append(f"| {entry} | {kind} | {sum(counts.values())} | "
+                         + " | ".join(str(counts[s]) for s in states) + " |")
+        total = sum(commands.values(), Counter())
+        lines.append(f"| **all** | | **{sum(total.values())}** | " + " | ".join(f"**{total[s]}**" for s in states)
+                     + " |")
     for test, counts in other.items():
         lines.append(f"* `{test}`: " + ", ".join(f"{counts[s]} {s}" for s in states if counts[s]))
     return "\n".join(lines)
