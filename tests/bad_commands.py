@@ -51,7 +51,7 @@ CLASSES = {
     "signal": "SIGTERM or SIGINT while the command works",
     "release": "a corrupt --release folder",
     "option": "a malformed option value or an unknown option: one line, no argparse usage",
-    "naming": "output names in upper case",
+    "naming": "output names in upper case, and a format that cannot hold the result",
     "side-file": "a file beside the input that the user did not name is not read",
     "ply": "PLY inputs: placeholder normals, a vertex count the data does not hold",
 }
@@ -392,6 +392,8 @@ def _naming() -> list[CommandCase]:
                     "--method pca", OK, outputs=("OUT.PLY",)),
         CommandCase("naming/.XYZ output", DENOISE, files({"wn.txt": ORIENTED}), "{dir}/wn.txt -o {dir}/OUT.XYZ", OK,
                     outputs=("OUT.XYZ", "OUT.normals")),
+        CommandCase("naming/.normals output", DENOISE, files({"wn.txt": ORIENTED}), "{dir}/wn.txt -o {dir}/dn.normals",
+                    BAD, ("{dir}/dn.normals", "normals only"), note="the denoised points would be lost"),
     ]
 
 

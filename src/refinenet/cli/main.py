@@ -285,6 +285,8 @@ def denoise(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
     writes = output_files(args.output)
+    if Path(args.output).suffix.lower() == ".normals":
+        raise OutputError(args.output, "holds normals only, and denoising moves the points (use a point format)")
     if args.surface and Path(args.surface).suffix.lower() not in (".ply", ".obj"):
         raise OutputError(args.surface, "unsupported surface type (use .ply or .obj)")
     _check_outputs(args, writes + ([Path(args.surface)] if args.surface else []), normals=args.normals)
