@@ -1,0 +1,96 @@
+"""Simulated range scans of the procedural shapes: what a depth camera sees of an object (docs/algorithm.md §1.5).
+
+A virtual sensor at a few viewpoints around the shape casts rays on a regular grid of its image plane. Each ray
+returns the nearest surface point facing the sensor (self-occlusion by a z-buffer over a dense sample of the
+surface), so the density falls with the square of the range and with the obliquity of the surface, and parts
+hidden from every viewpoint are missing. The range is measured with Gaussian noise along the ray that grows with
+the square of the range, and quantised as a Kinect v1 quantises it (the disparity 1/r in fixed steps, so depth
+steps grow with the square of the range too). The normals are the exact normals of the surface points hit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from refinenet.data import shapes
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A depth camera looking at a shape from `views` viewpoints around it, in metres and radians."""
+
+    range_m: float
+    """From the sensor to the shape's centre."""
+    object_radius_m: float
+    """The shape's radius in metres (the catalogue's shapes have radius 1): the scale of the scene."""
+    pixel_rad: float
+    """Angular step of the ray grid at the image centre."""
+    sigma_m: float
+    """Range noise at 1 m: a ray at range r metres has sigma = sigma_m * r^2."""
+    disparity_step: float
+    """Quantisation of the disparity 1/r, in 1/m (depth steps of about disparity_step * r^2); 0: none."""
+    views: int
+    """Viewpoints, evenly spaced in azimuth around the vertical axis."""
+    elevation_deg: float
+    """Height of the viewpoints above the shape's equator, as an angle seen from its centre."""
+
+
+#: A Kinect v1 (57 degrees over 640 pixels; Khoshelham and Oude Elberink 2012: sigma = 1.425e-3 r^2 m, depth
+#: resolution about 2.73e-3 r^2 m) 1.2 m from an object of 60 cm, from three sides.
+KINECT_V1 = Sensor(range_m=1.2, object_radius_m=0.3, pixel_rad=1.55e-3, sigma_m=1.425e-3, disparity_step=2.73e-3,
+                   views=3, elevation_deg=20.0)
+#: Surface samples per ray, at least, on the nearest surface seen square-on (more where it is farther or oblique):
+#: a ray misses the front surface, and may see an occluded one through the gap, with probability exp(-8) or less.
+SAMPLES_PER_RAY = 8.0
+
+
+def viewpoints(sensor: Sensor) -> np.ndarray:
+    """(views, 3) sensor positions in shape units, evenly spaced in azimuth at the sensor's elevation."""
+    distance = sensor.range_m / sensor.object_radius_m
+    azimuth = 2 * np.pi * np.arange(sensor.views) / sensor.views
+    elevation = np.radians(sensor.elevation_deg)
+    return distance * np.c_[np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
+                            np.full(sensor.views, np.sin(elevation))]
+
+
+def simulate_scan(shape: str, sensor: Sensor, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The points, exact unit normals and viewpoint index of every ray's return, over all viewpoints, in the
+    shape's units. The same (shape, sensor, seed) gives bit-identical arrays."""
+    positions = viewpoints(sensor)
+    nearest = np.linalg.norm(positions[0]) - 1.0  # range of the closest possible surface point, in shape radii
+    footprint = nearest * sensor.pixel_rad
+    area = shapes.surface(shape).areas.sum()
+    surface, normals = shapes.sample_shape(shape, int(SAMPLES_PER_RAY * area / footprint**2), seed)
+    rng = np.random.default_rng(seed + 1)
+    parts = [_view(surface, normals, position, sensor, rng) for position in positions]
+    points = np.concatenate([p for p, _ in parts])
+    hit_normals = np.concatenate([n for _, n in parts])
+    view = np.concatenate([np.full(len(p), i) for i, (p, _) in enumerate(parts)])
+    return points, hit_normals, view
+
+
+def _view(surface: np.ndarray, normals: np.ndarray, position: np.ndarray, sensor: Sensor,
+          rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The returns of one viewpoint: the nearest front-facing sample per ray, noisy and quantised in range."""
+    forward = -position / np.linalg.norm(position)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rays = surface - position
+    facing = np.einsum("ij,ij->i", normals, rays) < 0
+    rays, hit_normals = rays[facing], normals[facing]
+    depth = rays @ forward
+    pixel = np.floor(np.c_[rays @ right, rays @ up] / depth[:, None] / sensor.pixel_rad).astype(np.int64)
+    ranges = np.linalg.norm(rays, axis=1)
+    order = np.lexsort((ranges, pixel[:, 1], pixel[:, 0]))
+    first = order[np.r_[True, np.any(np.diff(pixel[order], axis=0) != 0, axis=1)]]
+    metres = sensor.object_radius_m
+    measured = ranges[first] * metres
+    measured = measured + rng.normal(size=len(first)) * sensor.sigma_m * measured**2
+    if sensor.disparity_step > 0:
+        measured = 1.0 / (np.round(1.0 / measured / sensor.disparity_step) * sensor.disparity_step)
+    directions = rays[first] / ranges[first][:, None]
+    return position + directions * (measured / metres)[:, None], hit_normals[first]
+
