@@ -264,3 +264,36 @@ def test_binary_float64_pcd_is_read_exactly(tmp_path, cloud):
     (tmp_path / "short.pcd").write_bytes((tmp_path / "pcl.pcd").read_bytes()[:-100])
     with pytest.raises(InputError, match=f"declares {len(points)} points, the data holds {len(points) - 3}"):
         read_cloud(tmp_path / "short.pcd")
+
+
+def test_a_failed_rename_puts_back_the_outputs_it_replaced(tmp_path, cloud, monkeypatch):
+    """With --force over an .xyz and its .normals, the second rename fails: the first output is put back."""
+    from refinenet import atomic
+    from refinenet.errors import OutputError
+
+    for name in ("a.xyz", "a.normals"):
+        (tmp_path / name).write_text(f"the earlier {name}\n")
+    replace, calls = os.replace, []
+
+    def second_fails(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", second_fails)
+    with pytest.raises(OutputError, match="No space left"), atomic.atomic_group():
+        write_points(tmp_path / "a.xyz", *cloud)
+    assert {p.name: p.read_text() for p in tmp_path.iterdir()} == {n: f"the earlier {n}\n" for n in ("a.xyz",
+                                                                                                       "a.normals")}
+
+
+def test_a_failed_output_removes_the_folders_made_for_it(tmp_path, cloud):
+    from refinenet.atomic import atomic_group
+    from refinenet.errors import OutputError
+
+    (tmp_path / "blocker").write_text("")
+    with pytest.raises(OutputError), atomic_group():
+        write_points(tmp_path / "new" / "deep" / "a.xyz", *cloud)
+        write_points(tmp_path / "blocker" / "b.ply", *cloud)
+    assert [p.name for p in tmp_path.iterdir()] == ["blocker"]

@@ -25,38 +25,61 @@ def _umask() -> int:
 
 #: The (temporary, final) paths of the open `atomic_group`, renamed when it ends; None outside a group.
 _GROUP: ContextVar[list[tuple[Path, Path]] | None] = ContextVar("atomic_group", default=None)
-#: Every temporary of this process not yet renamed or deleted (`remove_temporaries`).
+#: Every temporary of this process not yet renamed or deleted, and the folders made for outputs not yet in place
+#: (`remove_temporaries`).
 _LIVE: set[Path] = set()
+_MADE: list[Path] = []
+#: Characters of an output's name kept in its temporary's name, so that a long legal name stays legal.
+STEM_CHARS = 64
+
+
+def _failed(path: Path, err: OSError) -> OutputError:
+    return OutputError(path, f"cannot be written ({err.strerror or type(err).__name__})")
 
 
 @contextmanager
 def atomic_group(committed: Callable[[], None] | None = None) -> Iterator[None]:
     """Defer the renames of every `atomic_path` in the block to its successful end, then make them all in one
     `interrupts.held` block, and call `committed` before it ends (a command then stops treating a signal as
-    "nothing was written"). On any failure every temporary is deleted and no output of the block appears."""
+    "nothing was written"). On any failure every temporary is deleted and no output of the block appears; a file
+    an output replaced (with --force) is put back from a hard link made before the renames."""
     pending: list[tuple[Path, Path]] = []
     token = _GROUP.set(pending)
     try:
         yield
     except BaseException:
-        for tmp, _ in pending:
-            _remove(tmp)
+        _undo(tmp for tmp, _ in pending)
         raise
     finally:
         _GROUP.reset(token)
-    done: list[Path] = []
     with held():
+        backups: dict[Path, Path] = {}
+        done: list[Path] = []
         try:
+            for tmp, path in pending:
+                if path.is_file() and not path.is_symlink():
+                    backup = tmp.with_name(tmp.name + ".old")
+                    try:
+                        os.link(path, backup)
+                    except OSError:  # a file system without hard links: that file cannot be put back
+                        continue
+                    backups[path] = backup
+                    _LIVE.add(backup)
             for tmp, path in pending:
                 os.replace(tmp, path)
                 _LIVE.discard(tmp)
                 done.append(path)
         except OSError as err:
-            for tmp, _ in pending:
-                _remove(tmp)
-            for path in done:  # new files only: an output that replaced another (--force) cannot be taken back
-                path.unlink(missing_ok=True)
-            raise OutputError(pending[len(done)][1], f"cannot be written ({err.strerror})") from None
+            for path in done:
+                if path in backups:
+                    os.replace(backups[path], path)
+                else:
+                    path.unlink(missing_ok=True)
+            _undo([tmp for tmp, _ in pending] + list(backups.values()))
+            raise _failed(pending[len(done)][1], err) from None
+        for backup in backups.values():
+            _remove(backup)
+        _MADE.clear()
         if committed is not None:
             committed()
 
@@ -64,35 +87,51 @@ def atomic_group(committed: Callable[[], None] | None = None) -> Iterator[None]:
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside `path`; on success rename it onto `path` (at the end of the enclosing
-    `atomic_group`, if any), on failure delete it.
+    `atomic_group`, if any), on failure delete it (and any folder made for it).
 
     The temporary name keeps the final suffix, so writers that dispatch on the extension (numpy, open3d)
     behave as they would for the final file.
     """
     path = Path(path)
+    group, tmp_path = _GROUP.get(), None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        _make_folders(path.parent)
         with held():  # a temporary exists only once it is known to remove_temporaries
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix.lower()}",
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem[:STEM_CHARS]}.", suffix=f".tmp{path.suffix.lower()}",
                                        dir=path.parent)
-            _LIVE.add(Path(tmp))
+            tmp_path = Path(tmp)
+            _LIVE.add(tmp_path)
+        try:
+            os.fchmod(fd, 0o666 & ~_umask())
+        finally:
+            os.close(fd)
     except OSError as err:
-        raise OutputError(path, f"cannot be written ({err.strerror})") from None
-    os.fchmod(fd, 0o666 & ~_umask())
-    os.close(fd)
-    tmp_path, group = Path(tmp), _GROUP.get()
+        _undo([tmp_path] if tmp_path else [])
+        raise _failed(path, err) from None
     try:
         yield tmp_path
         if group is None:
             os.replace(tmp_path, path)
             _LIVE.discard(tmp_path)
+            _MADE.clear()
         else:
             group.append((tmp_path, path))
     except OSError as err:
-        raise OutputError(path, f"cannot be written ({err.strerror})") from None
+        raise _failed(path, err) from None
     finally:
         if tmp_path in _LIVE and (group is None or (tmp_path, path) not in group):
-            _remove(tmp_path)
+            _undo([tmp_path])
+
+
+def _make_folders(folder: Path) -> None:
+    """Create `folder` and the missing folders above it, remembering each for `_undo`."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    for made in reversed(missing):
+        made.mkdir(exist_ok=True)
+        _MADE.append(made)
 
 
 def _remove(tmp: Path) -> None:
@@ -100,11 +139,24 @@ def _remove(tmp: Path) -> None:
     _LIVE.discard(tmp)
 
 
-def remove_temporaries() -> None:
-    """Delete every temporary this process still has: for a command that stops on a signal at once, without
-    unwinding (which would leave the threads of a pool running into the interpreter's shutdown)."""
-    for tmp in list(_LIVE):
+def _undo(temporaries) -> None:
+    """Delete the temporaries, then the folders made for outputs, deepest first, while they are empty."""
+    for tmp in list(temporaries):
         _remove(tmp)
+    if not _LIVE:
+        for folder in reversed(_MADE):
+            try:
+                folder.rmdir()
+            except OSError:
+                pass
+        _MADE.clear()
+
+
+def remove_temporaries() -> None:
+    """Delete every temporary this process still has, and the folders made for them: for a command that stops
+    on a signal at once, without unwinding (which would leave the threads of a pool running into the
+    interpreter's shutdown)."""
+    _undo(list(_LIVE))
 
 
 def write_text(path: str | Path, text: str) -> None:
