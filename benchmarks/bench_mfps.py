@@ -56,7 +56,7 @@ def cloud(n: int) -> tuple[np.ndarray, np.ndarray, str]:
     """Clean fandisk points, ground-truth normals and where they came from."""
     xyz = DATA / "pcpnet_format" / "fandisk100k.xyz"
     if n == 100_000 and xyz.exists():
-        c = read_cloud(xyz)
+        c = read_cloud(xyz, sibling_normals=True)
         return c.points, c.normals, "PCPNet fandisk100k.xyz"
     mesh = DATA / "meshes" / "train" / "sharp" / "fandisk.obj"
     if mesh.exists():

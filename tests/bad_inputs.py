@@ -202,13 +202,15 @@ def _ply_builder(*args, **kwargs) -> Builder:
     return lambda path: path.write_bytes(_ply(*args, **kwargs))
 
 
-def _pcd(fields: str, types: str, rows: np.ndarray, declared: int | None = None) -> bytes:
+def _pcd(fields: str, types: str, rows: np.ndarray, declared: int | None = None, binary: bool = False,
+         counts: str | None = None) -> bytes:
+    """A PCD file of 4-byte fields, text or binary, with `counts` (one per field; default 1 each)."""
     n = len(rows) if declared is None else declared
-    count = " ".join("1" for _ in fields.split())
+    count = counts or " ".join("1" for _ in fields.split())
     size = " ".join("4" for _ in fields.split())
     header = (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {fields}\nSIZE {size}\nTYPE {types}\nCOUNT {count}\n"
-              f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA ascii\n")
-    return header.encode() + _rows(rows).encode()
+              f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {'binary' if binary else 'ascii'}\n")
+    return header.encode() + (np.asarray(rows, "<f4").tobytes() if binary else _rows(rows).encode())
 
 
 def _directory(path: Path) -> None:
@@ -375,6 +377,12 @@ def _cloud_cases() -> list[Case]:
         Case("lying count.pcd", "cloud", _pcd("x y z", "F F F", pts, declared=2 * N_POINTS), ERROR, ""),
         Case("intensity.pcd", "cloud", _pcd("x y z intensity normal_x normal_y normal_z", "F F F F F F F",
                                             np.c_[pts, np.ones(N_POINTS), nrm]), VALID, note="an extra field"),
+        Case("binary.pcd", "cloud", _pcd("x y z normal_x normal_y normal_z", "F F F F F F", six, binary=True), VALID,
+             note="read by numpy"),
+        Case("zero count binary.pcd", "cloud", _pcd("x y z", "F F F", pts, binary=True, counts="0 1 1"), ERROR,
+             "counts", note="a field of no values"),
+        Case("lying count binary.pcd", "cloud", _pcd("x y z", "F F F", pts, declared=2 * N_POINTS, binary=True),
+             ERROR, "truncated"),
     ]
 
 

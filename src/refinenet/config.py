@@ -23,7 +23,7 @@ from typing import Any, Literal
 import jsonschema
 import yaml
 
-from refinenet.errors import ParamsError
+from refinenet.errors import ParamsError, first_line
 
 SCHEMA = Path(__file__).with_name("params.schema.yaml")
 #: LibYAML's parser where PyYAML was built with it: the same documents, about ten times faster to read, which every
@@ -547,7 +547,7 @@ def read_raw(path: str | Path = "params.yaml") -> dict[str, Any]:
     try:
         return yaml.load(path.read_text(), Loader=_YAML_LOADER)
     except (OSError, ValueError, yaml.YAMLError) as err:  # ValueError: not UTF-8 text
-        raise ParamsError("(file)", f"cannot be read as YAML ({str(err).splitlines()[0]})", str(path)) from None
+        raise ParamsError("(file)", f"cannot be read as YAML ({first_line(err)})", str(path)) from None
 
 
 def load(path: str | Path = "params.yaml", apply_profile: bool = True, variant: str = FULL) -> Params:

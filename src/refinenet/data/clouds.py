@@ -23,7 +23,7 @@ from refinenet.data import shapes
 from refinenet.data.io import POINT_FILE_SUFFIXES, Cloud, check_array, read_cloud
 from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
 from refinenet.data.noise import add_gaussian_noise, bbox_diagonal, derive_seed
-from refinenet.errors import InputError, ParamsError
+from refinenet.errors import InputError, ParamsError, first_line
 
 SPLITS = ("train", "test")
 CATEGORY_ALIASES = {
@@ -241,7 +241,7 @@ def _read_pidx(path: Path, n_points: int) -> list[int]:
             warnings.simplefilter("ignore", UserWarning)
             idx = np.loadtxt(path, dtype=np.int64, ndmin=1)
     except (ValueError, OSError) as err:
-        raise InputError(path, f"malformed .pidx file ({str(err).splitlines()[0]})") from None
+        raise InputError(path, f"malformed .pidx file ({first_line(err)})") from None
     if idx.size == 0:
         raise InputError(path, "empty .pidx file (no point indices)")
     if idx.min() < 0 or idx.max() >= n_points:

@@ -1,8 +1,8 @@
 """Reading and writing point clouds with normals, with validation that names the file and the problem.
 
-Formats: PCPNet text (`NAME.xyz` + optional `NAME.normals`, also 6-column `.xyz`), `.ply` and `.pcd`
-(via Open3D), `.npy` (N x 3 or N x 6), and the pipeline's own `.npz` cloud records (points, normals and
-the metadata that produced them, seed included).
+Formats: PCPNet text (`NAME.xyz` + optional `NAME.normals`, also 6-column `.xyz`), `.ply` and `.pcd` (read by
+Open3D, binary `.pcd` by numpy; written here), `.npy` (N x 3 or N x 6), and the pipeline's own `.npz` cloud
+records (points, normals and the metadata that produced them, seed included).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from refinenet.atomic import atomic_path
-from refinenet.errors import InputError, OutputError
+from refinenet.errors import InputError, OutputError, first_line
 from refinenet.interrupts import held
 
 #: Point files a user or a data source gives, and (with .npz) the pipeline's own cloud records.
@@ -65,8 +65,7 @@ def _read_table(path: Path, what: str) -> np.ndarray:
             warnings.simplefilter("ignore", UserWarning)
             table = np.loadtxt(path, dtype=np.float64, ndmin=2, comments="#", encoding="utf-8-sig")
     except ValueError as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else "unreadable"
-        raise InputError(path, f"malformed {what} file ({first})") from None
+        raise InputError(path, f"malformed {what} file ({first_line(err)})") from None
     if table.size == 0:
         raise InputError(path, f"empty {what} file (no numeric rows)")
     return table
@@ -183,8 +182,7 @@ def _load_npy(path: Path) -> np.ndarray:
             raise InputError(path, f"expected an array of numbers, found dtype {array.dtype}")
         return np.array(array, dtype=np.float64)
     except (ValueError, OSError, EOFError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise InputError(path, f"unreadable .npy file ({first})") from None
+        raise InputError(path, f"unreadable .npy file ({first_line(err)})") from None
 
 
 def save_record(path: str | Path, arrays: dict[str, np.ndarray], meta: dict[str, Any]) -> None:
@@ -269,10 +267,19 @@ def native_failure(path: Path, messages: list[str]) -> str | None:
     return re.sub(r"^\[Open3D \w+\]\s*", "", bad[0]).replace(str(path), path.name) if bad else None
 
 
+#: The most header a PLY or PCD file may have (comments included) before its data.
+MAX_HEADER = 1 << 24
+
+
 def _header(path: Path, end: bytes) -> list[list[str]]:
     """The words of each header line of a PLY or PCD file, up to the line starting with `end`."""
+    head = b""
     with open(path, "rb") as fh:
-        head = fh.read(65536)
+        while len(head) < MAX_HEADER and not re.search(rb"(^|\n)" + end, head):
+            chunk = fh.read(65536)
+            if not chunk:
+                break
+            head += chunk
     lines = [line.split() for line in head.decode("ascii", "replace").splitlines()]
     ends = [i for i, words in enumerate(lines) if words[:1] == [end.decode()]]
     return lines[:ends[0] + 1] if ends else []
@@ -292,6 +299,13 @@ def _data_start(path: Path, end: bytes) -> int:
             if line.split()[:1] == [end]:
                 return fh.tell()
     return path.stat().st_size
+
+
+def _text_lines(path: Path, start: int) -> int:
+    """The non-blank lines of a file from byte `start` on: the rows of a text PLY or PCD body."""
+    with open(path, "rb") as fh:
+        fh.seek(start)
+        return sum(1 for line in fh if line.strip())
 
 
 def _ply_points(path: Path) -> tuple[int, int | None]:
@@ -316,9 +330,7 @@ def _ply_points(path: Path) -> tuple[int, int | None]:
         return count, None
     start = _data_start(path, b"end_header")
     if fmt == "ascii":
-        with open(path, "rb") as fh:
-            fh.seek(start)
-            return count, sum(1 for line in fh if line.strip())
+        return count, _text_lines(path, start)
     row_bytes = sum(PLY_SIZES[words[1]] for words in header if words[:1] == ["property"])
     return count, (path.stat().st_size - start) // row_bytes
 
@@ -341,6 +353,8 @@ def _read_binary_pcd(path: Path, header: dict[str, list[str]]) -> tuple[np.ndarr
     fields, n = header["FIELDS"], int(header["POINTS"][0])
     sizes, counts = header.get("SIZE", []), header.get("COUNT", ["1"] * len(fields))
     try:
+        if not all(count.isdigit() and int(count) >= 1 for count in counts):
+            raise ValueError("a count below 1")
         dtype = np.dtype([(f"{i}_{name}", PCD_TYPES[kind, size], (int(count),))
                           for i, (name, kind, size, count) in enumerate(zip(fields, header["TYPE"], sizes, counts,
                                                                             strict=True))])
@@ -372,9 +386,7 @@ def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             return _read_binary_pcd(path, header)
         expected, rows = int(header["POINTS"][0]), None
         if header.get("DATA", [""])[0] == "ascii":
-            with open(path, "rb") as fh:
-                fh.seek(_data_start(path, b"DATA"))
-                rows = sum(1 for line in fh if line.strip())
+            rows = _text_lines(path, _data_start(path, b"DATA"))
     else:
         expected, rows = _ply_points(path)
     if rows is not None and rows < expected:
@@ -438,7 +450,6 @@ def write_points(path: str | Path, points: np.ndarray, normals: np.ndarray) -> N
     coordinate's shortest exact decimal, `.pcd` is binary float32 where that holds every coordinate exactly and
     text float64 (which Open3D reads) where it does not."""
     suffix = check_output_type(path)
-    files = output_files(path)
     if suffix == ".ply":
         write_ply(path, points, normals)
     elif suffix == ".pcd":
@@ -449,10 +460,10 @@ def write_points(path: str | Path, points: np.ndarray, normals: np.ndarray) -> N
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
             np.save(fh, np.concatenate([points, normals], axis=1).astype(np.float64))
     else:
-        with atomic_path(files[0]) as tmp, open(tmp, "w") as fh:
+        with atomic_path(path) as tmp, open(tmp, "w") as fh:
             fh.writelines(_text_rows(points, None if suffix == ".xyz" else normals))
         if suffix == ".xyz":
-            write_normals(files[1], normals)
+            write_normals(output_files(path)[1], normals)
 
 
 def _text_rows(points: np.ndarray, normals: np.ndarray | None) -> Iterator[str]:

@@ -19,7 +19,7 @@ import torch
 
 from refinenet.atomic import write_text, write_torch
 from refinenet.config import InferenceConfig, Params, PatchConfig
-from refinenet.errors import InputError
+from refinenet.errors import InputError, first_line
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import Features
 from refinenet.geometry.scale import spacing_ratio
@@ -115,9 +115,12 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
         raise InputError(path, "no trained networks here (run `snakemake -j2 release` to export a run's)")
     try:  # torch's unpickler can fail on damaged bytes with almost any exception
         bundle = torch.load(path, map_location="cpu", weights_only=True)
-        card = json.loads((folder / CARD_JSON).read_text())
     except Exception as err:  # noqa: BLE001
-        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {_first_line(err)})") from None
+        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {first_line(err)})") from None
+    try:
+        card = json.loads((folder / CARD_JSON).read_text())
+    except (OSError, ValueError) as err:
+        raise InputError(folder / CARD_JSON, f"not a release's model card ({first_line(err)})") from None
     version = bundle.get("format") if isinstance(bundle, dict) else None
     if not isinstance(version, int) or version < 1:
         raise InputError(path, "not a Refine-Net release (it has no format)")
@@ -136,12 +139,8 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
             net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state.items()})
             networks[int(c)] = for_inference(net.to(device), fuse, precision)
     except (KeyError, TypeError, AttributeError, ValueError, RuntimeError) as err:
-        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {_first_line(err)})") from None
+        raise InputError(path, f"not a Refine-Net release ({type(err).__name__}: {first_line(err)})") from None
     return Release(params, cluster_model, networks, card)
-
-
-def _first_line(err: BaseException) -> str:
-    return str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
 
 
 def _upgrade(resolved: dict[str, Any], network: dict[str, Any], version: int) -> tuple[dict[str, Any], dict[str, Any]]:
