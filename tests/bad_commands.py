@@ -19,6 +19,7 @@ The prefix of a case's name, up to the `/`, is the class of the issue it covers 
 from __future__ import annotations
 
 import io
+import os
 import resource
 import signal
 from collections import Counter
@@ -45,7 +46,7 @@ CLASSES = {
     "twice": "two outputs are the same file",
     "exists": "an output exists: refused without --force, replaced with it",
     "partial": "one of several outputs cannot be written: none is",
-    "folder": "a folder where a file is read or written",
+    "folder": "a folder (or a pipe) where a file is read or written",
     "permission": "an unreadable input or a read-only output folder (meaningless as root)",
     "disk-full": "the disk fills while an output is written (RLIMIT_FSIZE)",
     "signal": "SIGTERM or SIGINT while the command works",
@@ -143,6 +144,10 @@ def symlink(target: str) -> Callable[[Path], None]:
 
 def hardlink(target: str) -> Callable[[Path], None]:
     return lambda path: path.hardlink_to(path.parent / target)
+
+
+def fifo(path: Path) -> None:
+    os.mkfifo(path)
 
 
 def folder_mode(mode: int) -> Callable[[Path], None]:
@@ -255,6 +260,9 @@ def _exists() -> list[CommandCase]:
     return [
         CommandCase("exists/output", n, files({"in.xyz": CLOUD, "out.ply": EARLIER}),
                     "{dir}/in.xyz -o {dir}/out.ply --method pca", BAD, (*refused, "{dir}/out.ply")),
+        CommandCase("exists/a dangling symbolic link as output", n,
+                    files({"in.xyz": CLOUD, "out.ply": symlink("nowhere.ply")}),
+                    "{dir}/in.xyz -o {dir}/out.ply --method pca", BAD, ("exists", "--force", "{dir}/out.ply")),
         CommandCase("exists/output --force", n, files({"in.xyz": CLOUD, "out.ply": EARLIER}),
                     "{dir}/in.xyz -o {dir}/out.ply --method pca --force", OK, outputs=("out.ply",)),
         CommandCase("exists/the .normals of an .xyz output", n, files({"in.xyz": CLOUD, "res.normals": EARLIER}),
@@ -303,6 +311,8 @@ def _folder() -> list[CommandCase]:
                     "{dir}/in.xyz -o {dir}/out.ply --method pca --force", BAD, ("{dir}/out.ply",)),
         CommandCase("folder/input", n, files({"cloud.xyz": _directory}), "{dir}/cloud.xyz -o {dir}/out.ply "
                     "--method pca", BAD, ("{dir}/cloud.xyz",)),
+        CommandCase("folder/a named pipe as output --force", n, files({"in.xyz": CLOUD, "out.ply": fifo}),
+                    "{dir}/in.xyz -o {dir}/out.ply --method pca --force", BAD, ("{dir}/out.ply", "not a regular file")),
         CommandCase("folder/output", d, files({"wn.txt": ORIENTED, "dn.ply": _directory}),
                     "{dir}/wn.txt -o {dir}/dn.ply --force", BAD, ("{dir}/dn.ply",)),
         CommandCase("folder/input", d, files({"wn.txt": _directory}), "{dir}/wn.txt -o {dir}/dn.ply", BAD,
@@ -373,6 +383,7 @@ def _release() -> list[CommandCase]:
 
 def _option() -> list[CommandCase]:
     normal = [("--strata=²", "--strata"), ("--strata=-1", "--strata"), ("--threads=0", "--threads"),
+              ("--threads=100000", "--threads"),
               ("--threads=x", "--threads"), ("--tile-points=abc", "--tile-points"), ("--bogus", "--bogus"),
               ("--viewpoint 1 2", "--viewpoint")]
     denoise = [("--radius=nan", "radius"), ("--iterations=x", "--iterations"), ("--bogus", "--bogus")]

@@ -14,6 +14,7 @@ import ctypes
 import hashlib
 import os
 import select
+import stat
 import subprocess
 import sys
 import time
@@ -59,6 +60,8 @@ def _entry(path: Path) -> Entry:
         return Entry("link", os.readlink(path), info.st_ino, 0, info.st_mtime_ns, None)
     if path.is_dir():  # a folder's time changes with its entries: those are compared one by one
         return Entry("folder", None, info.st_ino, 0, 0, None)
+    if stat.S_ISFIFO(info.st_mode):  # reading a pipe would wait for a writer
+        return Entry("pipe", None, info.st_ino, 0, info.st_mtime_ns, None)
     try:
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
     except PermissionError:

@@ -37,9 +37,9 @@ def check_outputs(reads: Mapping[str, Sequence[str | Path]], writes: Sequence[st
             raise OutputError(path, f"is written twice (also as {written[key]}); choose another output")
         written[key] = path
         try:
-            info = os.stat(path)
-        except FileNotFoundError:
-            info = None
+            info = os.stat(path) if os.path.lexists(path) else None
+        except FileNotFoundError:  # a dangling symbolic link: an existing name all the same
+            info = os.lstat(path)
         except OSError as err:
             raise OutputError(path, f"cannot be written ({err.strerror})") from None
         if info is not None and (info.st_dev, info.st_ino) in inputs:
@@ -49,6 +49,8 @@ def check_outputs(reads: Mapping[str, Sequence[str | Path]], writes: Sequence[st
                                     f"with --force)")
         if info is not None and stat.S_ISDIR(info.st_mode):
             raise OutputError(path, "is a folder")
+        if info is not None and not (stat.S_ISREG(info.st_mode) or stat.S_ISLNK(info.st_mode)):
+            raise OutputError(path, "exists and is not a regular file (a device, a pipe or a socket)")
         if info is not None and not force:
             raise OutputError(path, "exists; pass --force to replace it")
         _check_folder(path)

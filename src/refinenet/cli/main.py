@@ -17,6 +17,8 @@ from pathlib import Path
 from refinenet.threads import limit_native_threads
 
 EXIT_BAD_INPUT = 2
+#: More threads than this only exhaust the machine (torch and OpenMP fail to start them, far from the user's input).
+MAX_THREADS = 1024
 ORIENTATIONS = ("mst", "viewpoint", "none")
 
 EXAMPLES = """examples:
@@ -142,8 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     even when this is called from Python, with one line and the status 128 + the signal, nothing written. Only a
     bug of ours prints a traceback."""
     args = parser().parse_args(argv)
-    if getattr(args, "threads", 1) < 1:
-        return _fail(f"--threads: must be at least 1, got {args.threads}")
+    if not 1 <= getattr(args, "threads", 1) <= MAX_THREADS:
+        return _fail(f"--threads: must be 1 to {MAX_THREADS}, got {args.threads}")
     if args.command == "normals":
         limit_native_threads(args.threads)
     from refinenet.errors import RefineNetError
@@ -253,14 +255,28 @@ def _given_normals(path: str, cloud_path: str, n_points: int):
     from refinenet.data.io import read_cloud, read_normals
     from refinenet.errors import InputError
 
-    if Path(path).suffix.lower() in (".normals", ".npy"):
+    if Path(path).suffix.lower() == ".normals":
         return read_normals(path, n_points)
-    normals = read_cloud(path).normals
+    normals = read_cloud(path).normals if Path(path).suffix.lower() != ".npy" else _npy_normals(path, n_points)
     if normals is None:
         raise InputError(path, "has no normals")
     if len(normals) != n_points:
         raise InputError(path, f"{len(normals)} normals for {n_points} points of {cloud_path}")
     return normals
+
+
+def _npy_normals(path: str, n_points: int):
+    """An N x 3 `.npy` of normals, or the normals of an N x 6 one (as `refinenet normals -o X.npy` writes)."""
+    from refinenet.data.io import read_cloud, read_normals
+    from refinenet.errors import InputError
+
+    try:
+        return read_normals(path, n_points)
+    except InputError:
+        normals = read_cloud(path).normals
+        if normals is None:
+            raise
+        return normals
 
 
 def denoise(args: argparse.Namespace) -> int:
@@ -285,11 +301,11 @@ def denoise(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
     writes = output_files(args.output)
-    if Path(args.output).suffix.lower() == ".normals":
-        raise OutputError(args.output, "holds normals only, and denoising moves the points (use a point format)")
     if args.surface and Path(args.surface).suffix.lower() not in (".ply", ".obj"):
         raise OutputError(args.surface, "unsupported surface type (use .ply or .obj)")
     _check_outputs(args, writes + ([Path(args.surface)] if args.surface else []), normals=args.normals)
+    if Path(args.output).suffix.lower() == ".normals":
+        raise OutputError(args.output, "holds normals only, and denoising moves the points (use a point format)")
     settings = replace(_release(args, with_networks=False).params.denoise,
                        **{k: v for k, v in (("radius", args.radius), ("sigma", args.sigma), ("lam", args.lam),
                                             ("iterations", args.iterations), ("poisson_depth", args.poisson_depth))
@@ -298,7 +314,9 @@ def denoise(args: argparse.Namespace) -> int:
     cloud = read_cloud(args.input, min_points=3)
     normals = _given_normals(args.normals, args.input, len(cloud)) if args.normals else cloud.normals
     if normals is None:
-        raise InputError(args.input, "has no normals: give them with --normals, or run `refinenet normals` first")
+        beside = Path(args.input).with_suffix(".normals")
+        hint = f"--normals {beside}" if beside.is_file() else "--normals, or run `refinenet normals` first"
+        raise InputError(args.input, f"has no normals: give them with {hint}")
     try:
         points = point_update(cloud.points, normals, settings.radius * bbox_diagonal(cloud.points), settings.sigma,
                               settings.lam, settings.iterations)
