@@ -272,10 +272,13 @@ def _npy_normals(path: str, n_points: int):
 
     try:
         return read_normals(path, n_points)
-    except InputError:
-        normals = read_cloud(path).normals
+    except InputError as err:
+        try:
+            normals = read_cloud(path).normals
+        except InputError:
+            normals = None
         if normals is None:
-            raise
+            raise err from None
         return normals
 
 
