@@ -14,6 +14,8 @@ import sys
 import time
 from pathlib import Path
 
+from refinenet import interrupts
+from refinenet.atomic import remove_temporaries
 from refinenet.threads import limit_native_threads
 
 EXIT_BAD_INPUT = 2
@@ -51,10 +53,8 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 def _interrupt(signum: int, _frame) -> None:
     """Stop at once on SIGINT or SIGTERM: remove the temporaries, say so in one line, and exit with 128 + the
     signal without unwinding, so that no thread of a pool runs on into the interpreter's shutdown. Inside an
-    `interrupts.held` block (the final renames, a native reader) the signal waits for its end."""
-    from refinenet import interrupts
-    from refinenet.atomic import remove_temporaries
-
+    `interrupts.held` block (the final renames, a native reader) the signal waits for its end. (Nothing is
+    imported here: the signal may come in the middle of an import.)"""
     if interrupts.is_held():
         interrupts.defer(signum)
         return
