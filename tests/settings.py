@@ -23,6 +23,8 @@ patch_config = _changed(BASE.patches)
 train_config = _changed(BASE.training)
 clustering_config = _changed(BASE.clustering)
 inference_config = _changed(BASE.inference)
+#: The simulated scans' sensor (params.yaml `scanner`, a pipeline block outside `Params`).
+SCANNER = config.ScannerConfig.from_resolved(config.resolve(config.read_raw(REPO / "params.yaml"), apply_profile=False))
 
 
 #: The network params.yaml's own values build (the release preset for X = 9 and knn-100 patches).

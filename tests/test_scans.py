@@ -7,11 +7,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from settings import SCANNER
 
-from refinenet.data.scans import KINECT_V1, simulate_scan, viewpoints
+from refinenet.data.scans import simulate_scan, viewpoints
+from refinenet.errors import ParamsError
 
-#: A coarse Kinect: 5x the pixel, so that a test samples a few hundred thousand surface points, not millions.
-COARSE = replace(KINECT_V1, pixel_rad=5 * KINECT_V1.pixel_rad)
+#: params.yaml's Kinect v1 at 3x its pixel, so that a test samples about 100,000 surface points, not 900,000.
+COARSE = replace(SCANNER, pixel_rad=3 * SCANNER.pixel_rad)
 EXACT = replace(COARSE, sigma_m=0.0, disparity_step=0.0)
 #: torus_a: major radius 1, minor 0.35, scaled so that its farthest point is at distance 1.
 TORUS_R, TORUS_r = 1 / 1.35, 0.35 / 1.35
@@ -98,3 +100,8 @@ def test_a_scan_is_reproducible():
     a, b = simulate_scan("gear_a", COARSE, seed=8), simulate_scan("gear_a", COARSE, seed=8)
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(x, y)
+
+
+def test_a_shape_outside_the_catalogue_is_refused_by_its_key():
+    with pytest.raises(ParamsError, match="scanner.shapes: 'teapot' is not a shape of the catalogue"):
+        simulate_scan("teapot", COARSE, seed=0)

@@ -384,6 +384,46 @@ class FiguresConfig:
 
 
 @dataclass(frozen=True)
+class ScannerConfig:
+    """params.yaml `scanner`: the virtual depth camera of the simulated scans (docs/algorithm.md §1.5), the clouds
+    of table_scans and, by default, of fig_real. A pipeline block like `variants`: a release neither stores nor
+    needs it. Lengths in metres, angles in radians unless named otherwise."""
+
+    shapes: tuple[str, ...]
+    """Shapes of the procedural catalogue (`data.shapes`) scanned, one scan each."""
+    range_m: float
+    """From the sensor to the shape's centre."""
+    object_radius_m: float
+    """The shape's radius in metres (the catalogue's shapes have radius 1): the scale of the scene."""
+    pixel_rad: float
+    """Angular step of the ray grid at the image centre."""
+    sigma_m: float
+    """Range noise at 1 m: a ray at range r metres has sigma = sigma_m * r^2."""
+    disparity_step: float
+    """Quantisation of the disparity 1/r, in 1/m (depth steps of about disparity_step * r^2); 0: none."""
+    views: int
+    """Viewpoints, evenly spaced in azimuth around the vertical axis."""
+    elevation_deg: float
+    """Height of the viewpoints above the shape's equator, as an angle seen from its centre."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "shapes", tuple(self.shapes))
+        _check(self.range_m > self.object_radius_m, "scanner.range_m", "must exceed scanner.object_radius_m (the "
+               "sensor would be inside the shape)")
+
+    @classmethod
+    def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> ScannerConfig:
+        """The block of resolved params, checked against its part of the schema."""
+        if "scanner" not in params:
+            raise ParamsError("scanner", "is missing", source)
+        validate_block("scanner", params["scanner"], source)
+        try:
+            return cls(**params["scanner"])
+        except ParamsError as err:
+            raise ParamsError(err.key, err.problem, source) from None
+
+
+@dataclass(frozen=True)
 class Params:
     """Every setting of a run, one block per section of params.yaml (each documented in its dataclass)."""
 

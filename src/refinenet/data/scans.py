@@ -10,43 +10,18 @@ steps grow with the square of the range too). The normals are the exact normals 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from refinenet.config import ScannerConfig
 from refinenet.data import shapes
+from refinenet.errors import ParamsError
 
-
-@dataclass(frozen=True)
-class Sensor:
-    """A depth camera looking at a shape from `views` viewpoints around it, in metres and radians."""
-
-    range_m: float
-    """From the sensor to the shape's centre."""
-    object_radius_m: float
-    """The shape's radius in metres (the catalogue's shapes have radius 1): the scale of the scene."""
-    pixel_rad: float
-    """Angular step of the ray grid at the image centre."""
-    sigma_m: float
-    """Range noise at 1 m: a ray at range r metres has sigma = sigma_m * r^2."""
-    disparity_step: float
-    """Quantisation of the disparity 1/r, in 1/m (depth steps of about disparity_step * r^2); 0: none."""
-    views: int
-    """Viewpoints, evenly spaced in azimuth around the vertical axis."""
-    elevation_deg: float
-    """Height of the viewpoints above the shape's equator, as an angle seen from its centre."""
-
-
-#: A Kinect v1 (57 degrees over 640 pixels; Khoshelham and Oude Elberink 2012: sigma = 1.425e-3 r^2 m, depth
-#: resolution about 2.73e-3 r^2 m) 1.2 m from an object of 60 cm, from three sides.
-KINECT_V1 = Sensor(range_m=1.2, object_radius_m=0.3, pixel_rad=1.55e-3, sigma_m=1.425e-3, disparity_step=2.73e-3,
-                   views=3, elevation_deg=20.0)
 #: Surface samples per ray, at least, on the nearest surface seen square-on (more where it is farther or oblique):
 #: a ray misses the front surface, and may see an occluded one through the gap, with probability exp(-8) or less.
 SAMPLES_PER_RAY = 8.0
 
 
-def viewpoints(sensor: Sensor) -> np.ndarray:
+def viewpoints(sensor: ScannerConfig) -> np.ndarray:
     """(views, 3) sensor positions in shape units, evenly spaced in azimuth at the sensor's elevation."""
     distance = sensor.range_m / sensor.object_radius_m
     azimuth = 2 * np.pi * np.arange(sensor.views) / sensor.views
@@ -55,9 +30,11 @@ def viewpoints(sensor: Sensor) -> np.ndarray:
                             np.full(sensor.views, np.sin(elevation))]
 
 
-def simulate_scan(shape: str, sensor: Sensor, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def simulate_scan(shape: str, sensor: ScannerConfig, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The points, exact unit normals and viewpoint index of every ray's return, over all viewpoints, in the
     shape's units. The same (shape, sensor, seed) gives bit-identical arrays."""
+    if shape not in shapes.catalogue():
+        raise ParamsError("scanner.shapes", f"'{shape}' is not a shape of the catalogue (data.shapes)")
     positions = viewpoints(sensor)
     nearest = np.linalg.norm(positions[0]) - 1.0  # range of the closest possible surface point, in shape radii
     footprint = nearest * sensor.pixel_rad
@@ -71,7 +48,7 @@ def simulate_scan(shape: str, sensor: Sensor, seed: int) -> tuple[np.ndarray, np
     return points, hit_normals, view
 
 
-def _view(surface: np.ndarray, normals: np.ndarray, position: np.ndarray, sensor: Sensor,
+def _view(surface: np.ndarray, normals: np.ndarray, position: np.ndarray, sensor: ScannerConfig,
           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """The returns of one viewpoint: the nearest front-facing sample per ray, noisy and quantised in range."""
     forward = -position / np.linalg.norm(position)
