@@ -6,8 +6,9 @@
 * loss (fig:loss2): one shape at increasing noise, each point blue where the L1 network has the lower error, red
   where the L2 one has;
 * training: training loss and validation error per epoch of every cluster, one figure per trained variant;
-* real (fig:real_boy / fig:outdoor): normals as RGB on real scans (no ground truth) by PCA, Jet, MFPS and the
-  X = 8 variant's networks, through the chain of `refinenet normals` (radii from the point spacing);
+* real (fig:real_boy / fig:outdoor): normals as RGB on scans by PCA, Jet, MFPS and the X = 8 variant's networks,
+  through the chain of `refinenet normals` (radii from the point spacing): a folder of real scans (no ground truth
+  needed) where params.yaml `figures.scans` names one, else the simulated scans (results/scans);
 * denoise (fig:block): one test cloud's points after denoising with each method's normals, coloured by their
   distance to the true surface, and the screened Poisson surface of each (normals oriented by `orient_mst`), beside
   the noisy input and the true surface."""
@@ -16,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from refinenet import config
-from refinenet.cli.estimate import estimate_normals, min_points
+from refinenet.cli.estimate import compared_normals, min_points
 from refinenet.data.clouds import cloud_key, read_scan, scan_files, scored_points, surface_sample
 from refinenet.data.io import read_cloud, read_normals
 from refinenet.evaluation.denoise import poisson_surface, read_record
@@ -36,15 +37,13 @@ from refinenet.evaluation.table import METHOD_NAMES
 from refinenet.features.cache import load_for_cloud
 from refinenet.geometry.orientation import orient_mst
 from refinenet.network.clustering import cloud_clusters, load_cluster_model
-from refinenet.network.inference import load_networks
-from refinenet.network.model import architecture
 from refinenet.network.release import Release
 from refinenet.pipeline import captions, stage
+from refinenet.pipeline.captions import scanner_line
 from refinenet.pipeline.catalogue import (
     CLUSTER_FIGURE_VARIANTS,
     DENOISE_INPUT,
     DENOISE_METHODS,
-    FIGURE_METHODS,
     REAL_VARIANT,
     TABLES,
 )
@@ -90,7 +89,7 @@ def main(params, args):
     elif args.figure == "denoise":
         denoise(params.denoise, args.clouds[0], args.records[0], footer)
     elif args.figure == "real":
-        real(pipe.params[REAL_VARIANT], args.scans, args.clouds, args.clusters[0], args.networks, footer)
+        real(pipe, args.scans, args.clouds, args.clusters[0], args.networks, footer)
     else:
         for v in pipe.trained:
             n = pipe.params[v].clustering.n_clusters
@@ -129,22 +128,22 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
 
 
 
-def real(params, folder, training_clouds, cluster_path, network_folders, footer):
-    model, _ = load_cluster_model(cluster_path)
-    networks = load_networks(network_folders, architecture(params.network, params.features, params.patches),
-                             params.inference.device, precision=params.inference.precision)
-    release = Release.of_run(params, model, networks, [read_cloud(path).points for path in training_clouds])
+def real(pipe, folder, training_clouds, cluster_path, network_folders, footer):
+    params = pipe.params[REAL_VARIANT]
+    refined = f"{METHOD_NAMES[REFINENET]} (X = {params.features.n_normals})"
+    training = [read_cloud(path).points for path in training_clouds]
+    release = Release.of_run(params, cluster_path, network_folders, training)
     least = min_points(params, REFINENET, refine_initial=False)
     scans = []
     for path in scan_files(folder):
         points = read_scan(path, params.figures.scan_points, params.seed, least)
-        estimates = {METHOD_NAMES[m]: estimate_normals(points, release, m) for m in FIGURE_METHODS if m != REFINENET}
-        estimates[f"{METHOD_NAMES[REFINENET]} (X = {params.features.n_normals})"] = estimate_normals(
-            points, release, REFINENET, initial=estimates[METHOD_NAMES["mfps"]])
-        scans.append(Scan(path.stem, points, estimates))
+        estimates = compared_normals(points, {refined: release})
+        scans.append(Scan(path.stem, points, {METHOD_NAMES.get(m, m): n for m, n in estimates.items()}))
     most = params.figures.scan_points
-    real_figure(scans, footer + f" Real scans of {folder}" + (f", at most {most:,} points each" if most else "")
-                + "; l_d from the point spacing; each scan seen along its depth axis.", FIGURE_REAL)
+    source = f"Real scans of {folder}" if params.figures.scans else "Simulated scans"
+    real_figure(scans, f"{footer} {source}" + (f", at most {most:,} points each" if most else "")
+                + "; l_d from the point spacing; each scan seen along its depth axis."
+                + ("" if params.figures.scans else " " + scanner_line(pipe.scanner)), FIGURE_REAL)
 
 
 def denoise(config, cloud_path, record_path, footer):

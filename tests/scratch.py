@@ -10,7 +10,6 @@ from pathlib import Path
 from refinenet.pipeline.layout import TIMED_FILES
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = REPO.parent / "shared"
 
 
 def isolated(cwd: Path, **extra: str) -> dict[str, str]:
@@ -65,21 +64,8 @@ def smoke_copy(tmp: Path) -> Path:
             (tmp / f).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy2(REPO / f, tmp / f)
     set_param(tmp, "profile: cpu", "profile: smoke")
-    link_shared(tmp)
     sh(tmp, "git", "init", "-q")
     return tmp
-
-
-def link_shared(repo: Path) -> None:
-    """The shared development data beside the copy as beside the checkout (params.yaml's `figures.scans` is
-    relative to the repository); where there is none, the copy has no real-scan figure (`figures.scans: null`)."""
-    beside = repo.parent / "shared"
-    if SHARED.is_dir():
-        if not beside.exists():
-            beside.symlink_to(SHARED.resolve())
-        return
-    set_param(repo, "scans: ../shared/data/scans", "scans: null")
-    sh(repo, sys.executable, "-m", "refinenet.pipeline.dvc")
 
 
 def report_files(repo: Path) -> dict[str, bytes]:

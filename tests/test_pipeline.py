@@ -19,7 +19,7 @@ import pytest
 import slurm_cluster
 from browser import open_page
 from kill_anywhere import kill_anywhere, passed
-from scratch import SHARED, isolated, link_shared, path_without, set_param, sh, smoke_copy, snakemake
+from scratch import isolated, path_without, set_param, sh, smoke_copy, snakemake
 
 from refinenet import config
 from refinenet.data import shapes
@@ -29,7 +29,7 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN
+from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN, SCAN_TABLE
 from refinenet.pipeline.catalogue import TABLES as EVALUATED
 from refinenet.pipeline.layout import (
     CHECKPOINT_DIR,
@@ -38,6 +38,7 @@ from refinenet.pipeline.layout import (
     NETWORK,
     REFINED,
     REPORT_FILES,
+    SCAN,
     TABLES_PDF,
     TIME_FILES,
 )
@@ -138,13 +139,13 @@ def test_where_pdflatex_is_installed_snakemake_compiles_the_tables_into_one_pdf(
 
 
 def test_snakemake_builds_every_report(by_snakemake):
-    # csv, tex, per-cloud csv, metrics record of each table, of table_denoise and of table_time; the sweeps' (Kc,
-    # seeds) plots; the architecture table's csv, tex and layers; paper_comparison's md and tex; the normals, clusters,
-    # denoising, L1/L2 and real-scan figures' png and pdf, and the training curves of every trained variant; the
-    # page and the LaTeX of every table (not its PDF: pdflatex is hidden)
+    # csv, tex, per-cloud csv, metrics record of each table, of table_denoise, table_scans and table_time; the
+    # sweeps' (Kc, seeds) plots; the architecture table's csv, tex and layers; paper_comparison's md and tex; the
+    # normals, clusters, denoising, L1/L2 and scan figures' png and pdf, and the training curves of every trained
+    # variant; the page and the LaTeX of every table (not its PDF: pdflatex is hidden)
     reports = [p for p in (by_snakemake / "reports").rglob("*") if p.is_file()]
     sweeps = sum(1 for table in EVALUATED.values() if table.sweep)
-    assert len(reports) == 4 * (len(TABLES) + 2) + sweeps + 3 + 2 + 2 * (4 + len(REAL)) + len(PIPELINE.trained) + 2
+    assert len(reports) == 4 * (len(TABLES) + 3) + sweeps + 3 + 2 + 2 * (4 + len(REAL)) + len(PIPELINE.trained) + 2
     time_table = pd.read_csv(by_snakemake / TIME_FILES["csv"], index_col=0)
     assert (time_table["s per 1k points"] > 0).all() and time_table.loc["network", "parameters per cluster"] > 0
 
@@ -180,6 +181,21 @@ def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake)
     assert len(page.tables) == len(tables) and min(page.tables) >= 1
 
 
+def test_the_scan_table_scores_every_method_on_the_simulated_scans(by_snakemake):
+    """table_scans: each method on the smoke profile's two scans (fandisk_a, bumpysphere_a), every point scored.
+    PCA with K = 100 on the bumpy sphere, whose curvature is low at that reach, averages the range noise away: its
+    mean error stays within a few degrees; on the fandisk's edges it cannot."""
+    table = pd.read_csv(by_snakemake / f"reports/{SCAN_TABLE}.csv", index_col=0)
+    assert list(table.index) == ["PCA", "Jet", "MFPS", "Refine-Net (X = 9)", "Refine-Net (X = 8)"]
+    assert table.loc["PCA", "SmoothSurface/mean"] < 3 < table.loc["PCA", "SharpFeature/mean"]
+    pgp = table[[c for c in table.columns if "/pgp" in c]].to_numpy()
+    assert ((0 <= pgp) & (pgp <= 1)).all()
+    per_cloud = pd.read_csv(by_snakemake / f"reports/per_cloud/{SCAN_TABLE}.csv")
+    for shape in ("fandisk_a", "bumpysphere_a"):
+        points = read_cloud(by_snakemake / SCAN.format(shape=shape)).points
+        assert (per_cloud[per_cloud["cloud"] == shape]["n"] == len(points)).all(), shape
+
+
 def test_denoising_moves_points_and_measures_the_noisy_input_at_its_noise_level(by_snakemake):
     """The noisy input lies |N(0, s)| from its true surface: a mean of s sqrt(2/pi), s = noise % of l_d (in the
     table's 10^-3 l_d). Each method's row is measured on the same clouds."""
@@ -206,10 +222,7 @@ def test_the_variants_refine_the_same_seeded_subset_of_each_test_cloud_and_full_
         assert np.isfinite(np.loadtxt(by_snakemake / REFINED.format(variant=FULL, cloud=key))).all()
 
 
-RAW = config.read_raw(REPO / "params.yaml")
-if not SHARED.is_dir():
-    RAW["figures"]["scans"] = None  # as `scratch.link_shared` leaves the copies
-PIPELINE = Pipeline(RAW)
+PIPELINE = Pipeline(config.read_raw(REPO / "params.yaml"))
 STEPS = set(PIPELINE.steps)
 #: The programs that steps need beyond the Python environment, hidden from this module's runs (`real_path`).
 NEEDED = {step.needs for step in PIPELINE.steps.values() if step.needs}
@@ -228,9 +241,10 @@ RELEASE = {"release"}
 #: table_time names the data, MFPS's, the features', the network's and Kc's settings in its caption.
 TIME = {"table_time"}
 SEEDED = {name for name, step in PIPELINE.steps.items() if "seed" in step.keys}
-#: The real-scan figure, where the copies have the shared scans beside them (`scratch.link_shared`): it computes
-#: the baselines', MFPS's, the features' and the network's normals of each scan itself.
-REAL = {"fig_real"} & STEPS
+#: The scan figure and table: each computes the baselines', MFPS's, the features' and the network's normals of each
+#: simulated scan itself, through the chain of `refinenet normals`.
+REAL = {"fig_real"}
+SCANS = {"table_scans"}
 #: The figures name the data in their footers; the normals figures show the estimators' normals.
 FIGURES = {"fig_normals", "fig_clusters", "fig_training", "fig_denoise", "fig_loss"} | REAL
 NORMALS_FIGURE = {"fig_normals"} | REAL
@@ -252,22 +266,25 @@ def family(name: str) -> set[str]:
     [
         # PCA and Jet also start the Refine-Net of table_initial, which trains on their normals
         ("  jet_k: 100", "  jet_k: 90",
-         family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE | REPORT),
+         family("baselines") | MAIN_TABLES | {"table_initial", "table_pcpnet"} | RELEASE | NORMALS_FIGURE | SCANS
+         | REPORT),
         ("  theta_t: 60", "  theta_t: 45",
-         family("mfps") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
+         family("mfps") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | SCANS | REPORT),
         ("  protocol: synthetic", "  protocol: pcpnet", TABLES | {"paper_comparison"} | RELEASE | REPORT),
         ("seed: 2022", "seed: 7", SEEDED | RELEASE),  # the page tracks the seed: in SEEDED
         ("data: {n_points: 1000, max_shapes: 1}", "data: {n_points: 900, max_shapes: 1}",
          {"clouds_train", "clouds_test", "paper_comparison", DENOISE_TABLE} | TABLES | RELEASE | TIME | FIGURES
-         | REPORT),
+         | SCANS | REPORT),
         ("  hmp_k: 100", "  hmp_k: 90",
-         family("features") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | REPORT),
+         family("features") | REFINENET_TABLES | RELEASE | TIME | NORMALS_FIGURE | SCANS | REPORT),
         # the denoising application (and the release, whose settings `refinenet denoise` uses)
         ("  sigma: 0.35", "  sigma: 0.3", {"denoise", DENOISE_TABLE, "fig_denoise"} | RELEASE | REPORT),
         ("  n_clusters: 4", "  n_clusters: 3",
          family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"} | REPORT),
         ("  batch_size: 1024\n  device", "  batch_size: 512\n  device",
-         family("inference") | RELEASE | REAL | REPORT),
+         family("inference") | RELEASE | REAL | SCANS | REPORT),
+        # the simulated scans' sensor: the scans and their table (the figure follows the new scans)
+        ("  views: 3", "  views: 2", {"scans", "table_scans"}),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
         ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}",
          {"training_l1", "table_loss"} | REPORT),
@@ -338,8 +355,6 @@ def test_a_run_pushed_to_a_shared_cache_and_pulled_into_a_fresh_clone_leaves_bot
     sh(by_dvc, "git", "-c", "user.name=test", "-c", "user.email=test@example.org", "commit", "-qm", "a finished run")
     clone = tmp_path / "clone"
     sh(tmp_path, "git", "clone", "-q", str(by_dvc), str(clone))
-    if SHARED.is_dir():
-        link_shared(clone)  # the real-scan figure's scans, beside the clone as beside the run
     assert not (clone / "results").exists()
     sh(clone, "dvc", "pull", "--quiet", "--with-deps", *BY_DVC)
     sh(clone, sys.executable, "-m", "refinenet.pipeline.bridge", "sync", *BY_DVC)

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from refinenet.errors import ParamsError
-from refinenet.pipeline import bridge, captions, catalogue, dvc, page, steps, variants, workflow
+from refinenet.pipeline import bridge, captions, catalogue, dvc, steps, variants, workflow
 from refinenet.pipeline.methods import REFINENET, figure_name, refinenet
 
 REPO = Path(__file__).resolve().parents[1]
@@ -289,12 +289,15 @@ def test_a_table_needs_its_variants():
 def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
     """x8 (X = 8) serves the real-scan figure alone: its features of the training clouds, clusters and networks,
     no test-cloud features or inference. A variant asked for in the normals figure gets its test-cloud normals and
-    a column; an unknown one is reported under `figures.variants`; without a scans folder there is no fig_real."""
+    a column; an unknown one is reported under `figures.variants`. fig_real shows the simulated scans, or the folder
+    `figures.scans` names."""
     assert {"features_x8", "clustering_x8", "training_x8"} <= set(STEPS) and "inference_x8" not in STEPS
     assert STEPS["features_x8"].outs == ("results/features/x8/train",) and STEPS["features_x8"].split == "train"
     assert all(t.startswith("results/features/x8/train/") for t in STEPS["features_x8"].targets())
-    assert STEPS["fig_real"].deps == ("../shared/data/scans", "results/clouds/train", "results/clusters/x8",
+    assert STEPS["fig_real"].deps == ("results/scans", "results/clouds/train", "results/clusters/x8",
                                       "results/models/x8")
+    assert STEPS["table_scans"].deps == ("results/scans", "src/refinenet/shipped", "results/clouds/train",
+                                         "results/clusters/x8", "results/models/x8")
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     raw["figures"]["variants"] = ["x8", "l1"]
     pipeline = workflow.Pipeline(raw)
@@ -307,6 +310,9 @@ def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
     raw["figures"]["variants"] = ["nope"]
     with pytest.raises(ParamsError, match="figures.variants.*'nope' is not a variant"):
         workflow.Pipeline(raw)
-    raw["figures"].update(variants=[], scans=None)
+    raw["figures"].update(variants=[], scans="my/scans")
     pipeline = workflow.Pipeline(raw)
-    assert "fig_real" not in pipeline.steps and "real_scans" not in {f.name for f in page.reported(pipeline)[1]}
+    assert pipeline.steps["fig_real"].deps[0] == "my/scans" and pipeline.steps["table_scans"].deps[0] == "results/scans"
+    raw["scanner"]["shapes"] = ["teapot"]
+    with pytest.raises(ParamsError, match="scanner.shapes: 'teapot' is not a shape of the catalogue"):
+        workflow.Pipeline(raw)

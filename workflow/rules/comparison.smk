@@ -6,7 +6,7 @@ rule paper_comparison:
         "our tables beside the paper's numbers"
     input:
         code=PIPE.steps["paper_comparison"].code,
-        tables=[catalogue.Table.files(name)["csv"] for name in catalogue.TABLES],
+        tables=[catalogue.Table.files(name)["csv"] for name in catalogue.COMPARED_TABLES],
     output:
         **layout.COMPARISON_FILES,
     params:

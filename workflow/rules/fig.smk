@@ -105,36 +105,35 @@ rule fig_training:
         "python -m stages.fig --figure training 2>&1 | tee {log}"
 
 
-# [P] fig:real_boy / fig:outdoor: normals as RGB on real scans (no ground truth) by PCA, Jet, MFPS and Refine-Net with
-# X = 8, the paper's real-data setting.
+# [P] fig:real_boy / fig:outdoor: normals as RGB on scans by PCA, Jet, MFPS and Refine-Net with X = 8, the paper's
+# real-data setting: a folder of real scans where params.yaml `figures.scans` names one, else the simulated scans.
 
-if "fig_real" in PIPE.steps:
-
-    rule fig_real:
-        message:
-            "fig_real: normals on the real scans"
-        input:
-            code=PIPE.steps["fig_real"].code,
-            scans=PIPE.full.figures.scans,
-            clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
-            clusters=files(catalogue.REAL_VARIANT, "clustering", layout.CLUSTER_MODEL),
-            networks=[
-                files(catalogue.REAL_VARIANT, "training", layout.NETWORK, cluster=c)
-                for c in range(PIPE.params[catalogue.REAL_VARIANT].clustering.n_clusters)
-            ],
-        output:
-            **layout.FIGURE_REAL,
-        params:
-            tracked=tracked("fig_real"),
-        log:
-            "logs/fig/fig_real.log",
-        benchmark:
-            "logs/fig/fig_real.benchmark.tsv"
-        conda:
-            "../envs/refinenet.yaml"
-        shell:
-            "python -m stages.fig --figure real --scans {input.scans} --clouds {input.clouds}"
-            " --clusters {input.clusters} --networks {input.networks} 2>&1 | tee {log}"
+rule fig_real:
+    message:
+        "fig_real: normals on the scans"
+    input:
+        code=PIPE.steps["fig_real"].code,
+        scans=P.figures.scans or [layout.SCAN.format(shape=s) for s in PIPE.scanner.shapes],
+        clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
+        clusters=files(catalogue.REAL_VARIANT, "clustering", layout.CLUSTER_MODEL),
+        networks=[
+            files(catalogue.REAL_VARIANT, "training", layout.NETWORK, cluster=c)
+            for c in range(PIPE.params[catalogue.REAL_VARIANT].clustering.n_clusters)
+        ],
+    output:
+        **layout.FIGURE_REAL,
+    params:
+        folder=lambda wildcards, input: P.figures.scans or os.path.dirname(input.scans[0]),
+        tracked=tracked("fig_real"),
+    log:
+        "logs/fig/fig_real.log",
+    benchmark:
+        "logs/fig/fig_real.benchmark.tsv"
+    conda:
+        "../envs/refinenet.yaml"
+    shell:
+        "python -m stages.fig --figure real --scans {params.folder} --clouds {input.clouds}"
+        " --clusters {input.clusters} --networks {input.networks} 2>&1 | tee {log}"
 
 
 # [P] fig:block: one test cloud denoised with each method's normals, its points and screened Poisson surfaces.

@@ -130,6 +130,16 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     return normals
 
 
+def compared_normals(points: np.ndarray, releases: dict[str, Release]) -> dict[str, np.ndarray]:
+    """What the scan figure and table compare on one cloud, by name: PCA, Jet and MFPS with the settings of the
+    first release, then each release's Refine-Net refining those MFPS normals (l_d from the point spacing)."""
+    first = next(iter(releases.values()))
+    normals = {m: estimate_normals(points, first, m) for m in ("pca", "jet", "mfps")}
+    for name, release in releases.items():
+        normals[name] = estimate_normals(points, release, "refinenet", initial=normals["mfps"])
+    return normals
+
+
 def _margin(points: np.ndarray, tree, params: Params, method: str, runs_mfps: bool, length: float) -> float:
     """How far beyond its own points a tile must reach for `method` to see whole neighbourhood chains."""
     def radius(k: int) -> float:

@@ -23,9 +23,9 @@ from refinenet.errors import InputError, first_line
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import Features
 from refinenet.geometry.scale import spacing_ratio
-from refinenet.network.clustering import ClusterModel
-from refinenet.network.inference import refine_normals
-from refinenet.network.model import NetworkConfig, RefineNet, count_parameters, for_inference
+from refinenet.network.clustering import ClusterModel, load_cluster_model
+from refinenet.network.inference import load_networks, refine_normals
+from refinenet.network.model import NetworkConfig, RefineNet, architecture, count_parameters, for_inference
 from refinenet.network.training import network_fingerprint
 
 #: Where the package keeps its shipped release (the pipeline's `release` step writes it).
@@ -62,10 +62,14 @@ class Release:
         return float(self.card["training_data"]["spacing_ratio"])
 
     @classmethod
-    def of_run(cls, params: Params, cluster_model: ClusterModel, networks: dict[int, RefineNet],
+    def of_run(cls, params: Params, cluster_model_path: str | Path, network_folders: Sequence[str | Path],
                training_clouds: Sequence[np.ndarray]) -> Release:
-        """A run's trained networks used as a release without exporting them (e.g. a variant's, for a figure); the
-        card holds only the spacing ratio that `--scale spacing` needs."""
+        """A run's trained networks (a variant's cluster model and per-cluster training folders) used as a release
+        without exporting them, e.g. the X = 8 variant's for the scans; the card holds only the spacing ratio that
+        `--scale spacing` needs."""
+        cluster_model, _ = load_cluster_model(cluster_model_path)
+        networks = load_networks(network_folders, architecture(params.network, params.features, params.patches),
+                                 params.inference.device, precision=params.inference.precision)
         card = {"training_data": {"spacing_ratio": training_spacing(training_clouds)}}
         return cls(params, cluster_model, networks, card)
 

@@ -7,7 +7,7 @@ from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 from refinenet import config
-from refinenet.config import Params
+from refinenet.config import Params, ScannerConfig
 from refinenet.evaluation.table import METHOD_NAMES
 from refinenet.pipeline.catalogue import Table
 from refinenet.pipeline.methods import BASELINES, FULL, MFPS_METHODS, REFERENCE
@@ -28,6 +28,14 @@ def data_line(params: Params) -> str:
     d = params.data
     return (f"Profile {params.profile}; data: {d.source}" + (f" ({d.path})" if d.path else "")
             + f", {d.n_points} points per cloud.")
+
+
+def scanner_line(scanner: ScannerConfig) -> str:
+    """The simulated scans' sensor and shapes, as the scan table's caption and figure footer name them."""
+    s = scanner
+    return (f"Sensor {s.range_m} m from an object of radius {s.object_radius_m} m, pixel {s.pixel_rad:g} rad, "
+            f"range noise {s.sigma_m:g} r^2 m, disparity step {s.disparity_step:g} 1/m, {s.views} views at "
+            f"{s.elevation_deg:g} deg elevation; shapes {', '.join(s.shapes)}.")
 
 
 def _settings(values: dict[str, Any]) -> str:

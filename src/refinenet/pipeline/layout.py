@@ -25,6 +25,9 @@ RELEASE = "src/refinenet/shipped"
 #: (`mfps`) or a per-variant family and its variant (`features/full`).
 JOB_LOG = "logs/{step}/{cloud}.log"
 JOB_BENCHMARK = "logs/{step}/{cloud}.benchmark.tsv"
+#: A simulated range scan of one procedural shape (`data.scans`): its points and exact normals, as a user's scan.
+SCANS_DIR = "results/scans"
+SCAN = f"{SCANS_DIR}/{{shape}}.ply"
 #: The denoising application's record of one test cloud: its denoised points and distances to the true surface.
 DENOISED = "results/denoised/{cloud}.npz"
 

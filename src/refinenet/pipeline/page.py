@@ -16,6 +16,7 @@ from refinenet.pipeline.catalogue import (
     FIGURE_CATEGORIES,
     FIGURE_METHODS,
     REAL_VARIANT,
+    SCAN_TABLE,
     TABLES,
     Table,
 )
@@ -60,6 +61,7 @@ def reported(pipe: Pipeline) -> tuple[list[TableEntry], list[FigureEntry]]:
     tables = [TableEntry(name, files["csv"], files["tex"], files)
               for name, files in [*((n, _rel(Table.files(n))) for n in TABLES),
                                   *([(DENOISE_TABLE, _rel(Table.files(DENOISE_TABLE)))] if denoise else []),
+                                  (SCAN_TABLE, _rel(Table.files(SCAN_TABLE))),
                                   ("table_time", _rel(layout.TIME_FILES)),
                                   ("table_architecture", _rel(layout.ARCHITECTURE_FILES))]]
     figures = [
@@ -67,11 +69,12 @@ def reported(pipe: Pipeline) -> tuple[list[TableEntry], list[FigureEntry]]:
             "[P] fig:syn / fig:insight: normals as RGB and unoriented angular-error heat maps of "
             f"{', '.join(map(figure_name, pipe.figure_methods()))} on the first test cloud of "
             f"{' and '.join(FIGURE_CATEGORIES)}; each panel's mean error in its title.")),
-        *([FigureEntry("real_scans", **_figure(_rel(layout.FIGURE_REAL)), caption=(
+        FigureEntry("real_scans", **_figure(_rel(layout.FIGURE_REAL)), caption=(
             "[P] fig:real_boy / fig:outdoor: normals as RGB of "
-            f"{', '.join(METHOD_NAMES[m] for m in FIGURE_METHODS)} (X = 8, variant {REAL_VARIANT}) on the real "
-            f"scans of {pipe.full.figures.scans} (no ground truth), radii from the point spacing."))]
-          if pipe.full.figures.scans else []),
+            f"{', '.join(METHOD_NAMES[m] for m in FIGURE_METHODS)} (X = 8, variant {REAL_VARIANT}) on "
+            + (f"the real scans of {pipe.full.figures.scans} (no ground truth)" if pipe.full.figures.scans else
+               "the simulated scans of table_scans")
+            + ", radii from the point spacing.")),
         FigureEntry("clusters", **_figure(_rel(layout.FIGURE_CLUSTERS)), caption=(
             "[P] fig:cluster: a test cloud coloured by cluster for "
             f"{' and '.join(f'variant {v}' for v in CLUSTER_FIGURE_VARIANTS)}, beside the Kc curve.")),

@@ -22,9 +22,11 @@ from refinenet.pipeline.captions import DATA_KEYS
 from refinenet.pipeline.catalogue import (
     ARCHITECTURE,
     CLUSTER_FIGURE_VARIANTS,
+    COMPARED_TABLES,
     DENOISE_METHODS,
     DENOISE_TABLE,
     REAL_VARIANT,
+    SCAN_TABLE,
     TABLES,
     Table,
 )
@@ -118,7 +120,7 @@ def declare(pipe: Pipeline) -> list[Step]:
     """Every step of the pipeline, upstream first (the order of dvc.yaml's stages)."""
     return [*_clouds_steps(pipe), *_estimator_steps(pipe), *(s for v in pipe.params for s in _variant_steps(pipe, v)),
             _release_step(pipe), *(_table_step(pipe, name, table) for name, table in TABLES.items()),
-            *_summary_steps(pipe), *_figure_steps(pipe), *_real_steps(pipe), *_denoise_steps(pipe),
+            *_summary_steps(pipe), *_figure_steps(pipe), *_scan_steps(pipe), *_denoise_steps(pipe),
             *_report_steps(pipe)]
 
 
@@ -234,7 +236,8 @@ def _summary_steps(pipe: Pipeline) -> list[Step]:
         Step(
             name="paper_comparison", family="comparison", modules=("evaluation.paper", *_TABLE, *_STAGE),
             keys=(*DATA_KEYS, "evaluation.protocol"),
-            deps=tuple(Table.files(name)["csv"] for name in TABLES), outs=tuple(layout.COMPARISON_FILES.values()),
+            deps=tuple(Table.files(name)["csv"] for name in COMPARED_TABLES),
+            outs=tuple(layout.COMPARISON_FILES.values()),
             targets=lambda: list(layout.COMPARISON_FILES.values()),
         ),
         _table_files(
@@ -275,18 +278,23 @@ def _figure_steps(pipe: Pipeline) -> list[Step]:
     ]
 
 
-def _real_steps(pipe: Pipeline) -> list[Step]:
-    """The real-scan figure, where params.yaml `figures.scans` names a folder."""
-    scans = pipe.full.figures.scans
-    if not scans:
-        return []
-    return [_figure(
-        "fig_real", layout.FIGURE_REAL,
-        ("figures.scans", "figures.scan_points", "baselines", "mfps", "features", "network", "patches", "inference",
-         "seed"),
-        (scans, "results/clouds/train", pipe.variant_dir("clustering", REAL_VARIANT, ""),
-         pipe.variant_dir("training", REAL_VARIANT, "")), variant=REAL_VARIANT,
-    )]
+def _scan_steps(pipe: Pipeline) -> list[Step]:
+    """The simulated scans, their table and the scan figure (on a user's folder of scans where `figures.scans`
+    names one). The table and figure run the chain of `refinenet normals` (cli.estimate) with the X = 8 variant's
+    networks; the table also with the release's (X = 9)."""
+    x8 = (pipe.variant_dir("clustering", REAL_VARIANT, ""), pipe.variant_dir("training", REAL_VARIANT, ""))
+    estimated = ("baselines", "mfps", "features", "network", "patches", "inference", "seed")
+    return [
+        Step(name="simulate_scans", family="simulate",
+             modules=("data.scans", "data.shapes", "data.meshes", "data.noise", "data.io", *_STAGE),
+             keys=("seed", "scanner"), deps=(), outs=(layout.SCANS_DIR,),
+             targets=lambda: [layout.SCAN.format(shape=s) for s in pipe.scanner.shapes]),
+        _table_files(SCAN_TABLE, Table.files(SCAN_TABLE), family="scans", modules=_FIG,
+                     keys=(*DATA_KEYS, "scanner", *estimated),
+                     deps=(layout.SCANS_DIR, layout.RELEASE, "results/clouds/train", *x8), variant=REAL_VARIANT),
+        _figure("fig_real", layout.FIGURE_REAL, ("figures.scans", "figures.scan_points", *estimated),
+                (pipe.scans_folder(), "results/clouds/train", *x8), variant=REAL_VARIANT),
+    ]
 
 
 def _denoise_steps(pipe: Pipeline) -> list[Step]:

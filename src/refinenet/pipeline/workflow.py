@@ -10,11 +10,12 @@ import os
 from typing import Any
 
 from refinenet import config
-from refinenet.config import Params
+from refinenet.config import Params, ScannerConfig
 from refinenet.data.clouds import CloudSpec, list_clouds
+from refinenet.data.shapes import catalogue
 from refinenet.errors import ParamsError
 from refinenet.pipeline.catalogue import ARCHITECTURE, FIGURE_CATEGORIES, FIGURE_METHODS, REAL_VARIANT, TABLES, Table
-from refinenet.pipeline.layout import MODEL_DIR, NORMALS, REFINED
+from refinenet.pipeline.layout import MODEL_DIR, NORMALS, REFINED, SCANS_DIR
 from refinenet.pipeline.methods import FULL, REFINENET, refinenet, variant_of
 from refinenet.pipeline.steps import Step, declare
 from refinenet.pipeline.variants import owners, typed
@@ -48,9 +49,13 @@ class Pipeline:
         """Each variant's resolved params (dotted keys apply: `config.get(resolved[v], key)`)."""
         self.params = {v: typed(v, resolved, source) for v, resolved in self.resolved.items()}
         self.full = self.params[FULL]
-        real = [REAL_VARIANT] if self.full.figures.scans else []
+        self.scanner = ScannerConfig.from_resolved(self.resolved[FULL], source)
+        """The simulated scans' sensor: a pipeline block, read from full's resolved params."""
+        unknown = [s for s in self.scanner.shapes if s not in catalogue()]
+        if unknown:
+            raise ParamsError("scanner.shapes", f"'{unknown[0]}' is not a shape of the catalogue (data.shapes)", source)
         for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE),
-                               ("fig_real", real)]:
+                               ("fig_real and table_scans", [REAL_VARIANT])]:
             for v in variants:
                 if v not in self.params:
                     raise ParamsError("variants", f"{name} needs the variant '{v}', which is not defined", source)
@@ -60,7 +65,7 @@ class Pipeline:
                                   source)
         self.scored = {v for t in TABLES.values() for v in t.variants} | set(self.full.figures.variants)
         """The variants whose normals of the test clouds a table or the normals figure shows: only these have
-        test-cloud features and inference (x8 serves the real-scan figure alone)."""
+        test-cloud features and inference (x8 serves the scans alone)."""
         for name, methods in [*((n, t.methods) for n, t in TABLES.items()), ("fig_normals", self.figure_methods())]:
             self.scored_subset(methods, f"{name}: ")
         self.owners = {v: owners(raw, v) for v in self.params}
@@ -127,6 +132,10 @@ class Pipeline:
 
     def protocol(self, table: Table) -> str:
         return table.protocol or self.full.evaluation.protocol
+
+    def scans_folder(self) -> str:
+        """fig_real's scans: the folder params.yaml `figures.scans` names, or the simulated scans."""
+        return self.full.figures.scans or SCANS_DIR
 
     def denoise_keys(self) -> list[str]:
         """The test clouds the denoising application covers: those synthesised from a surface (a procedural shape or
