@@ -5,7 +5,7 @@
 * clusters (fig:cluster): a test cloud coloured by cluster for Kc = 2 and Kc = 4, beside the Kc curve;
 * loss (fig:loss2): one shape at increasing noise, each point blue where the L1 network has the lower error, red
   where the L2 one has;
-* training: training loss and validation error per epoch of every cluster, one figure per trained variant;
+* training: training loss and validation error per epoch of every cluster of one trained variant (`--variant`);
 * real (fig:real_boy / fig:outdoor): normals as RGB on scans by PCA, Jet, MFPS and the X = 8 variant's networks,
   through the chain of `refinenet normals` (radii from the point spacing): a folder of real scans (no ground truth
   needed) where params.yaml `figures.scans` names one, else the simulated scans (results/scans);
@@ -91,11 +91,11 @@ def main(params, args):
     elif args.figure == "real":
         real(pipe, args.scans, args.clouds, args.clusters[0], args.networks, footer)
     else:
-        for v in pipe.trained:
-            n = pipe.params[v].clustering.n_clusters
-            histories = {c: pd.read_csv(HISTORY.format(variant=v, cluster=c)) for c in range(n)}
-            training_figure(histories, f"Refine-Net variant {v}: {n} clusters", footer,
-                            {"png": FIGURE_TRAINING.format(variant=v)})
+        v = args.variant
+        n = pipe.params[v].clustering.n_clusters
+        histories = {c: pd.read_csv(HISTORY.format(variant=v, cluster=c)) for c in range(n)}
+        training_figure(histories, f"Refine-Net variant {v}: {n} clusters", footer,
+                        {"png": FIGURE_TRAINING.format(variant=v)})
 
 
 def panels(pipe, clouds, methods):

@@ -1,25 +1,30 @@
 """The reports in one place, one `--output` per step:
 * page (report): reports/index.html, every table rendered from its CSV and every figure, with the profile and the
-  settings that made them; and reports/tables.tex, one LaTeX document of every table;
+  settings that made them; and reports/tables.tex, one LaTeX document of every table. With `--scope main` (the
+  main job's page), the main job's files beside the committed results of the rest, each marked with its commit,
+  and what neither made listed with the target that builds it;
 * pdf (report_pdf): reports/tables.pdf, that document compiled with pdflatex."""
 
 import os
 from dataclasses import asdict
+from pathlib import Path
 
 import yaml
 
 from refinenet import config
 from refinenet.atomic import write_text
-from refinenet.evaluation.report import compile_pdf, page, tables_document
+from refinenet.evaluation.report import caption_profile, compile_pdf, origin, page, tables_document
 from refinenet.pipeline import captions, stage
-from refinenet.pipeline.layout import COMPARISON_FILES, REPORT_DIR, REPORT_FILES, TABLES_PDF
+from refinenet.pipeline.layout import REPORT_DIR, REPORT_FILES, TABLES_PDF
 from refinenet.pipeline.methods import FULL
-from refinenet.pipeline.page import reported
+from refinenet.pipeline.page import NOTES, reported
 from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):
     parser.add_argument("--output", required=True, choices=("page", "pdf"))
+    parser.add_argument("--scope", choices=("main", "all"), default="all",
+                        help="page: the main job's page, or that of every table and figure")
 
 
 def main(params, args):
@@ -27,15 +32,32 @@ def main(params, args):
         compile_pdf(REPORT_FILES["tex"], TABLES_PDF)
         return
     pipe = Pipeline(config.read_raw(args.params), args.params)
-    tables, figures = reported(pipe)
+    main_job = args.scope == "main"
+    tables, figures = reported(pipe, main_job)
+    root = Path(REPORT_DIR)
+    origins, absent = {}, []
+    for entry, path in [*((t, t.csv) for t in tables), *((f, f.png) for f in figures)]:
+        if not entry.made and (root / path).is_file():
+            profile = caption_profile(root / entry.tex) if getattr(entry, "tex", None) else None
+            origins[entry.name] = origin(root / path, profile)
+        elif not entry.made:
+            absent.append(entry)
+    tables = [t for t in tables if t not in absent]
+    figures = [f for f in figures if f not in absent]
+    notes = {}
+    for title, (path, by_main) in NOTES.items():
+        if by_main or not main_job or os.path.isfile(path):
+            notes[title] = os.path.relpath(path, REPORT_DIR)
+            if main_job and not by_main:
+                origins[title] = origin(path, None)
     settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full)}, sort_keys=False, width=120)
     changes = {v: captions.changes(pipe, v) for v in pipe.params if v != FULL}
     settings += ("\n# Refine-Net variants: what each changes (reference: full under the variant budget; the others:\n"
                  "# from reference)\n" + yaml.safe_dump(changes, sort_keys=False, width=120))
-    title = f"Refine-Net reproduction: reports of profile {params.profile}"
-    notes = {"Comparison with the paper": os.path.relpath(COMPARISON_FILES["md"], REPORT_DIR)}
+    title = (f"Refine-Net reproduction: the main job of profile {params.profile}, beside the committed results"
+             if main_job else f"Refine-Net reproduction: reports of profile {params.profile}")
     data = captions.data_line(params)
-    write_text(REPORT_FILES["html"], page(title, data, tables, figures, notes, settings, REPORT_DIR))
+    write_text(REPORT_FILES["html"], page(title, data, tables, figures, notes, settings, REPORT_DIR, origins, absent))
     write_text(REPORT_FILES["tex"], tables_document(f"{title}. {data}", [f"{REPORT_DIR}/{t.tex}" for t in tables]))
 
 

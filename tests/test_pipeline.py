@@ -29,7 +29,7 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN, SCAN_TABLE
+from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN, SCAN_TABLE, Table
 from refinenet.pipeline.catalogue import TABLES as EVALUATED
 from refinenet.pipeline.layout import (
     CHECKPOINT_DIR,
@@ -71,6 +71,7 @@ def by_snakemake(tmp_path_factory):
     began = time.monotonic()
     snakemake(repo, "-j2", "main")
     LENGTH["snakemake"] = time.monotonic() - began
+    shutil.copytree(repo / "reports", repo.parent / "main_page")  # the main job's page, before the full run's
     LOG["snakemake"] = snakemake(repo, "-j2").stderr
     return repo
 
@@ -169,6 +170,21 @@ def test_dvc_builds_the_same_files_and_leaves_snakemake_nothing_to_do(by_dvc, by
     second = sh(by_dvc, "dvc", "repro", *BY_DVC).stdout
     assert "Data and pipelines are up to date" in second
     assert "Running stage" not in second
+
+
+def test_the_main_jobs_page_shows_its_figures_and_every_committed_table_in_a_browser(by_snakemake):
+    """After the smoke main job, headless Chromium opens its page: the normals figure and the release's training
+    curves load, the main tables have rows, and every table the repository holds that the main job does not make
+    is there, marked as not rebuilt (the copy commits nothing: as an earlier run's); what nothing made is listed
+    with its target."""
+    tables, figures = reported(PIPELINE, main=True)
+    page = open_page(by_snakemake.parent / "main_page" / "index.html")
+    assert page.images == {f.png: "yes" for f in figures if f.made} and page.body.get("data-missing-images") == "0"
+    kept = [t for t in tables if not t.made and (REPO / "reports" / t.csv).is_file()]
+    assert kept and len(page.tables) == len([t for t in tables if t.made]) + len(kept) and min(page.tables) >= 1
+    html = (by_snakemake.parent / "main_page" / "index.html").read_text()
+    assert html.count("not rebuilt by this run") == len(kept) + 1  # and the comparison with the paper
+    assert f"<code>snakemake -j2 {Table.files(SCAN_TABLE)['csv']}</code>" in html
 
 
 def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake):

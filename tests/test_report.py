@@ -1,14 +1,24 @@
 """The report page and the tables document: tables rendered from their CSV as written, captions from the LaTeX,
 figures linked by relative path and checked in a real headless browser, and a PDF of the same bytes on a rerun."""
 
+import os
 import shutil
+import subprocess
 
 import matplotlib
 import pytest
 from browser import open_page
 
 from refinenet.errors import InputError, OutputError
-from refinenet.evaluation.report import compile_pdf, html_table, latex_caption, page, tables_document
+from refinenet.evaluation.report import (
+    caption_profile,
+    compile_pdf,
+    html_table,
+    latex_caption,
+    origin,
+    page,
+    tables_document,
+)
 from refinenet.evaluation.table import aggregate, to_csv_frame, to_latex
 from refinenet.pipeline.page import FigureEntry, TableEntry
 
@@ -99,3 +109,28 @@ def test_a_latex_error_is_one_line_naming_the_document(reports):
     with pytest.raises(InputError, match=r"bad.tex: pdflatex failed: ! Undefined control sequence"):
         compile_pdf(doc, reports / "bad.pdf")
     assert not (reports / "bad.pdf").exists()
+
+
+def test_a_report_the_run_did_not_make_says_where_it_comes_from(reports, monkeypatch):
+    """Committed and unchanged since: its commit's date; changed since, or never committed: an earlier run's. The
+    profile comes from the table's caption."""
+    monkeypatch.chdir(reports)
+    date = {"GIT_COMMITTER_DATE": "2026-11-29T12:00:00+00:00", "GIT_AUTHOR_DATE": "2026-11-29T12:00:00+00:00"}
+    git = ["git", "-c", "user.name=test", "-c", "user.email=test@example.org"]
+    subprocess.run([*git, "init", "-q"], check=True)
+    subprocess.run([*git, "add", "table_a.csv"], check=True)
+    subprocess.run([*git, "commit", "-qm", "a run"], check=True, env={**os.environ, **date})
+    (reports / "table_a.tex").write_text((reports / "table_a.tex").read_text().replace("Errors;", "Profile cpu;"))
+    assert caption_profile(reports / "table_a.tex") == "cpu"
+    assert origin("table_a.csv", "cpu") == "Committed result by profile cpu, of 2026-11-29: not rebuilt by this run."
+    (reports / "table_a.csv").write_text((reports / "table_a.csv").read_text() + "\n")
+    assert origin("table_a.csv", None) == "Result of an earlier run in this checkout: not rebuilt by this run."
+    assert origin("notes.md", "smoke").startswith("Result of an earlier run in this checkout by profile smoke")
+
+
+def test_what_nothing_made_is_listed_with_the_command_that_builds_it(reports):
+    tables, figures = entries(reports)
+    gone = FigureEntry("gone", "figures/gone.png", "Never made.", {}, made=False, target="reports/figures/gone.png")
+    html = page("t", "d", tables, figures, {}, "", reports, {"table_a": "From a commit."}, [gone])
+    assert "<li>gone: <code>snakemake -j2 reports/figures/gone.png</code></li>" in html
+    assert '<p class="origin">From a commit.</p>' in html and 'src="figures/gone.png"' not in html

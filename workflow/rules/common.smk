@@ -53,6 +53,15 @@ def split_priority(split):
     return int(split == "train")
 
 
+def main_page():
+    """Whether the run builds the main job's page: `snakemake main` (alone, or with files of the main job). Its
+    page shows what the main job made beside the committed results of the rest; any other run's (the default
+    target, `dvc repro`, `reports/index.html` asked for alone) shows every table and figure, made by the run.
+    Evaluated while the DAG is built, when the run's targets are known."""
+    targets = set(getattr(workflow.dag_settings, "targets", ()))
+    return "main" in targets and targets <= {"main", *PIPE.main_targets()}
+
+
 def installed(step):
     """Whether the program a step needs (if any) is installed; the default target skips the step, saying so, if not."""
     if step.needs and shutil.which(step.needs) is None:

@@ -83,26 +83,27 @@ rule fig_loss:
 
 rule fig_training:
     message:
-        "fig_training: training curves"
+        "fig_training: training curves of variant {wildcards.variant}"
     input:
         code=PIPE.steps["fig_training"].code,
-        histories=[
-            layout.HISTORY.format(variant=v, cluster=c)
-            for v in PIPE.trained
-            for c in range(PIPE.params[v].clustering.n_clusters)
+        histories=lambda wildcards: [
+            layout.HISTORY.format(variant=wildcards.variant, cluster=c)
+            for c in range(PIPE.params[wildcards.variant].clustering.n_clusters)
         ],
     output:
-        [layout.FIGURE_TRAINING.format(variant=v) for v in PIPE.trained],
+        layout.FIGURE_TRAINING,
+    wildcard_constraints:
+        variant="|".join(PIPE.trained),
     params:
         tracked=tracked("fig_training"),
     log:
-        "logs/fig/fig_training.log",
+        "logs/fig/fig_training_{variant}.log",
     benchmark:
-        "logs/fig/fig_training.benchmark.tsv"
+        "logs/fig/fig_training_{variant}.benchmark.tsv"
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.fig --figure training 2>&1 | tee {log}"
+        "python -m stages.fig --figure training --variant {wildcards.variant} 2>&1 | tee {log}"
 
 
 # [P] fig:real_boy / fig:outdoor: normals as RGB on scans by PCA, Jet, MFPS and Refine-Net with X = 8, the paper's

@@ -1,5 +1,5 @@
-# The reports in one place: reports/index.html (every table and figure, the profile and settings that made them)
-# and reports/tables.tex (every table in one LaTeX document), which report_pdf compiles where pdflatex is installed.
+# The reports in one place: reports/index.html (every table and figure, the profile and settings that made them;
+# after `snakemake main`, the main job's beside the committed results of the rest: `main_page`) and reports/tables.tex (every table in one LaTeX document), which report_pdf compiles where pdflatex is installed.
 
 
 rule report:
@@ -7,10 +7,11 @@ rule report:
         "report: reports/index.html and reports/tables.tex"
     input:
         code=PIPE.steps["report"].code,
-        reported=reported_files(PIPE),
+        reported=lambda wildcards: reported_files(PIPE, main_page()),
     output:
         **layout.REPORT_FILES,
     params:
+        scope=lambda wildcards: "main" if main_page() else "all",
         tracked=tracked("report"),
     log:
         "logs/report/report.log",
@@ -19,7 +20,7 @@ rule report:
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.report --output page 2>&1 | tee {log}"
+        "python -m stages.report --output page --scope {params.scope} 2>&1 | tee {log}"
 
 
 rule report_pdf:

@@ -3,8 +3,9 @@ of every table (reports/tables.tex, compiled to tables.pdf where pdflatex is ins
 
 The page opens from the file system, with no server: tables are rendered from their CSV files into the HTML, and
 figures are the PNG files beside it, linked by relative path. A short script marks each image loaded or missing
-(`data-loaded`), so a headless browser (and a reader) sees at once when a figure did not load. Nothing in either
-file depends on the time of the run, so a rerun on the same reports gives the same bytes.
+(`data-loaded`), so a headless browser (and a reader) sees at once when a figure did not load. A report the run
+did not make is marked with where it comes from (its commit). Nothing in either file depends on the time of the
+run, so a rerun on the same reports and commits gives the same bytes.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ class TableEntry(Protocol):
     csv: str
     tex: str | None
     links: Mapping[str, str]
+    target: str
 
 
 class FigureEntry(Protocol):
@@ -42,6 +44,7 @@ class FigureEntry(Protocol):
     png: str
     caption: str
     links: Mapping[str, str]
+    target: str
 
 
 #: Marks every image loaded or missing once the page has loaded, and counts the missing ones in the header.
@@ -66,34 +69,77 @@ table.results th:first-child, table.results td:first-child { text-align: left; }
 figure { margin: 1.5em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
 .scroll { overflow-x: auto; } ul.contents { columns: 3; }
 .caption { font-size: 0.9em; color: #444; } .links a { margin-right: 1em; } pre { font-size: 0.8em; overflow-x: auto; }
+.origin { font-size: 0.9em; color: #8a4b00; }
 </style>"""
 
 
 def page(title: str, data: str, tables: Sequence[TableEntry], figures: Sequence[FigureEntry],
-         notes: Mapping[str, str], settings: str, root: str | Path) -> str:
+         notes: Mapping[str, str], settings: str, root: str | Path, origins: Mapping[str, str] | None = None,
+         absent: Sequence[TableEntry | FigureEntry] = ()) -> str:
     """The HTML page. Paths are relative to `root` (the folder of the page), where they are read and linked from;
-    `notes` are text files shown as they are (e.g. the comparison with the paper), by title."""
-    root = Path(root)
+    `notes` are text files shown as they are (e.g. the comparison with the paper), by title. `origins` says, by
+    entry or note name, where each one the run did not make comes from (e.g. a commit); `absent` are the entries
+    that neither the run nor anything before it made, listed with the target that builds each."""
+    root, origins = Path(root), origins or {}
     body = [f"<h1>{_e(title)}</h1>", f"<p>{_e(data)} <span id=\"status\"></span></p>",
             '<h2>Contents</h2><ul class="contents">',
-            *(f'<li><a href="#{_e(t.name)}">{_e(t.name)}</a></li>' for t in tables),
             *(f'<li><a href="#{_e(f.name)}">{_e(f.name)}</a></li>' for f in figures),
+            *(f'<li><a href="#{_e(t.name)}">{_e(t.name)}</a></li>' for t in tables),
             *(f'<li><a href="#{_anchor(n)}">{_e(n)}</a></li>' for n in notes),
-            '<li><a href="#settings">settings</a></li></ul>', "<h2>Tables</h2>"]
+            *(['<li><a href="#not-built">not built</a></li>'] if absent else []),
+            '<li><a href="#settings">settings</a></li></ul>', "<h2>Figures</h2>"]
+    for f in figures:
+        body += [f'<figure id="{_e(f.name)}"><h3>{_e(f.name)}</h3>', *_origin(origins.get(f.name)),
+                 f'<img src="{_e(f.png)}" alt="{_e(f.name)}">',
+                 f'<figcaption class="caption">{_e(f.caption)}</figcaption>', _links(f.links), "</figure>"]
+    body.append("<h2>Tables</h2>")
     for t in tables:
         caption = latex_caption(root / t.tex) if t.tex else ""
-        body += [f'<section id="{_e(t.name)}"><h3>{_e(t.name)}</h3>', f'<p class="caption">{_e(caption)}</p>',
-                 html_table(root / t.csv), _links(t.links), "</section>"]
-    body.append("<h2>Figures</h2>")
-    for f in figures:
-        body += [f'<figure id="{_e(f.name)}"><h3>{_e(f.name)}</h3>', f'<img src="{_e(f.png)}" alt="{_e(f.name)}">',
-                 f'<figcaption class="caption">{_e(f.caption)}</figcaption>', _links(f.links), "</figure>"]
+        body += [f'<section id="{_e(t.name)}"><h3>{_e(t.name)}</h3>', *_origin(origins.get(t.name)),
+                 f'<p class="caption">{_e(caption)}</p>', html_table(root / t.csv), _links(t.links), "</section>"]
     for name, path in notes.items():
-        body += [f'<section id="{_anchor(name)}"><h2>{_e(name)}</h2>', _links({"source": path}),
-                 f"<pre>{_e(_read(root / path))}</pre></section>"]
+        body += [f'<section id="{_anchor(name)}"><h2>{_e(name)}</h2>', *_origin(origins.get(name)),
+                 _links({"source": path}), f"<pre>{_e(_read(root / path))}</pre></section>"]
+    if absent:
+        body += ['<section id="not-built"><h2>not built</h2><p>Neither this run nor an earlier one made these (all of '
+                 "them: <code>snakemake -j2</code> or <code>dvc repro</code>):</p><ul>",
+                 *(f"<li>{_e(a.name)}: <code>snakemake -j2 {_e(a.target)}</code></li>" for a in absent),
+                 "</ul></section>"]
     body += ['<section id="settings"><h2>settings</h2>', f"<pre>{_e(settings)}</pre></section>"]
     return "\n".join(["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">', f"<title>{_e(title)}</title>",
                       _STYLE, "</head><body>", *body, _CHECK_IMAGES, "</body></html>", ""])
+
+
+def _origin(origin: str | None) -> list[str]:
+    return [] if origin is None else [f'<p class="origin">{_e(origin)}</p>']
+
+
+def origin(path: str | Path, profile: str | None) -> str:
+    """Where a report the run did not make comes from: the date of its last commit where git holds it unchanged,
+    else an earlier run in this checkout; with the profile that made it, where known."""
+    made = f" by profile {profile}" if profile else ""
+    tracked = _git("ls-files", "--error-unmatch", "--", str(path)) is not None
+    changed = _git("status", "--porcelain", "--", str(path))
+    date = _git("log", "-1", "--format=%cs", "--", str(path)) if tracked and changed == "" else None
+    if date:
+        return f"Committed result{made}, of {date}: not rebuilt by this run."
+    return f"Result of an earlier run in this checkout{made}: not rebuilt by this run."
+
+
+def _git(*args: str) -> str | None:
+    """A git command's output in the current folder, or None where git is missing or fails (no repository, an
+    untracked file)."""
+    try:
+        run = subprocess.run(["git", *args], capture_output=True, text=True)
+    except OSError:
+        return None
+    return run.stdout.strip() if run.returncode == 0 else None
+
+
+def caption_profile(tex: Path) -> str | None:
+    """The profile a generated table's caption names (`captions.data_line`), or None."""
+    match = re.search(r"Profile (\S+?);", latex_caption(tex))
+    return match.group(1) if match else None
 
 
 def html_table(csv: Path) -> str:

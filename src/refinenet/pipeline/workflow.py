@@ -14,8 +14,16 @@ from refinenet.config import Params, ScannerConfig
 from refinenet.data.clouds import CloudSpec, list_clouds
 from refinenet.data.shapes import catalogue
 from refinenet.errors import ParamsError
-from refinenet.pipeline.catalogue import ARCHITECTURE, FIGURE_CATEGORIES, FIGURE_METHODS, REAL_VARIANT, TABLES, Table
-from refinenet.pipeline.layout import MODEL_DIR, NORMALS, REFINED, SCANS_DIR
+from refinenet.pipeline.catalogue import (
+    ARCHITECTURE,
+    FIGURE_CATEGORIES,
+    FIGURE_METHODS,
+    MAIN,
+    REAL_VARIANT,
+    TABLES,
+    Table,
+)
+from refinenet.pipeline.layout import FIGURE_TRAINING, MODEL_DIR, NORMALS, REFINED, REPORT_FILES, SCANS_DIR
 from refinenet.pipeline.methods import FULL, REFINENET, refinenet, variant_of
 from refinenet.pipeline.steps import Step, declare
 from refinenet.pipeline.variants import owners, typed
@@ -132,6 +140,12 @@ class Pipeline:
 
     def protocol(self, table: Table) -> str:
         return table.protocol or self.full.evaluation.protocol
+
+    def main_targets(self) -> list[str]:
+        """The main job's files (`snakemake main`): those of the MAIN steps, the release's training curves and the
+        page of them, beside the committed results of the rest."""
+        return [*(t for name in MAIN for t in self.steps[name].targets()), FIGURE_TRAINING.format(variant=FULL),
+                *REPORT_FILES.values()]
 
     def scans_folder(self) -> str:
         """fig_real's scans: the folder params.yaml `figures.scans` names, or the simulated scans."""
