@@ -13,6 +13,8 @@
   distance to the true surface, and the screened Poisson surface of each (normals oriented by `orient_mst`), beside
   the noisy input and the true surface."""
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 
@@ -56,7 +58,7 @@ from refinenet.pipeline.layout import (
     FIGURE_TRAINING,
     HISTORY,
 )
-from refinenet.pipeline.methods import REFINENET, figure_name
+from refinenet.pipeline.methods import REFINENET, figure_name, refinenet
 from refinenet.pipeline.workflow import Pipeline
 
 
@@ -68,7 +70,7 @@ def arguments(parser):
     parser.add_argument("--features", help="clusters: the cloud's feature cache (full's)")
     parser.add_argument("--clusters", nargs="+", default=[],
                         help="clusters: the cluster model of each Kc shown; real: the X = 8 variant's")
-    parser.add_argument("--scans", help="real: the folder of scans")
+    parser.add_argument("--scans", nargs="+", default=[], help="real: the simulated scans, or the folder of real ones")
     parser.add_argument("--networks", nargs="+", default=[], help="real: the network folder of each cluster")
     parser.add_argument("--sweep", help="clusters: table_clusters' CSV")
     parser.add_argument("--records", nargs="+", default=[], help="denoise: the cloud's denoising record")
@@ -128,22 +130,23 @@ def clusters(pipe, cloud_path, features_path, models, sweep_path, footer):
 
 
 
-def real(pipe, folder, training_clouds, cluster_path, network_folders, footer):
+def real(pipe, scans, training_clouds, cluster_path, network_folders, footer):
+    """`scans`: the simulated scans' files, or the folder of real scans that params.yaml `figures.scans` names."""
     params = pipe.params[REAL_VARIANT]
-    refined = f"{METHOD_NAMES[REFINENET]} (X = {params.features.n_normals})"
     training = [read_cloud(path).points for path in training_clouds]
     release = Release.of_run(params, cluster_path, network_folders, training)
     least = min_points(params, REFINENET, refine_initial=False)
-    scans = []
-    for path in scan_files(folder):
+    drawn = []
+    for path in scan_files(params.figures.scans) if params.figures.scans else map(Path, scans):
         points = read_scan(path, params.figures.scan_points, params.seed, least)
-        estimates = compared_normals(points, {refined: release})
-        scans.append(Scan(path.stem, points, {METHOD_NAMES.get(m, m): n for m, n in estimates.items()}))
+        estimates = compared_normals(points, {refinenet(REAL_VARIANT): release})
+        drawn.append(Scan(path.stem, points, {figure_name(m): n for m, n in estimates.items()}))
     most = params.figures.scan_points
-    source = f"Real scans of {folder}" if params.figures.scans else "Simulated scans"
-    real_figure(scans, f"{footer} {source}" + (f", at most {most:,} points each" if most else "")
+    source = f"Real scans of {params.figures.scans}" if params.figures.scans else "Simulated scans"
+    real_figure(drawn, f"{footer} {source}" + (f", at most {most:,} points each" if most else "")
                 + "; l_d from the point spacing; each scan seen along its depth axis."
-                + ("" if params.figures.scans else " " + scanner_line(pipe.scanner)), FIGURE_REAL)
+                + ("" if params.figures.scans else " " + scanner_line(pipe.scanner)) + " Refine-Net x8: X = "
+                + f"{params.features.n_normals}, without the initial normal.", FIGURE_REAL)
 
 
 def denoise(config, cloud_path, record_path, footer):

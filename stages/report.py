@@ -50,7 +50,8 @@ def main(params, args):
             notes[title] = os.path.relpath(path, REPORT_DIR)
             if main_job and not by_main:
                 origins[title] = origin(path, None)
-    settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full)}, sort_keys=False, width=120)
+    settings = yaml.safe_dump({"profile": params.profile, **asdict(pipe.full), "scanner": asdict(pipe.scanner)},
+                              sort_keys=False, width=120)
     changes = {v: captions.changes(pipe, v) for v in pipe.params if v != FULL}
     settings += ("\n# Refine-Net variants: what each changes (reference: full under the variant budget; the others:\n"
                  "# from reference)\n" + yaml.safe_dump(changes, sort_keys=False, width=120))

@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from refinenet import config
-from refinenet.cli.estimate import compared_normals
+from refinenet.cli.estimate import compared_normals, min_points
 from refinenet.data.io import read_cloud
 from refinenet.data.shapes import catalogue
 from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
@@ -16,9 +16,9 @@ from refinenet.evaluation.table import stats_row, write_table
 from refinenet.network.devices import resolve_device
 from refinenet.network.release import Release, load_release
 from refinenet.pipeline import stage
-from refinenet.pipeline.captions import data_line, scanner_line
+from refinenet.pipeline.captions import budget_line, data_line, scanner_line
 from refinenet.pipeline.catalogue import REAL_VARIANT, SCAN_METHODS, SCAN_TABLE, Table
-from refinenet.pipeline.methods import REFINENET
+from refinenet.pipeline.methods import REFINENET, figure_name
 from refinenet.pipeline.workflow import Pipeline
 
 
@@ -37,18 +37,21 @@ def main(params, args):
     releases = {REFINENET: load_release(args.release, device=resolve_device(pipe.full.inference.device)),
                 SCAN_METHODS[-1]: Release.of_run(x8, args.clusters, args.networks, training)}
     shapes, rows = catalogue(), []
+    least = min_points(x8, REFINENET, refine_initial=False)
     for path in map(Path, args.scans):
-        scan = read_cloud(path)
+        scan = read_cloud(path, least)
         for method, normals in compared_normals(scan.points, releases).items():
             stats = ErrorStats.from_angles(unoriented_angles(normals, scan.normals))
             rows.append(stats_row(method, shapes[path.stem].category, path.stem, stats))
             print(f"{path.stem} {method}: mean {stats.mean:.2f} deg, PGP10 {stats.pgp10:.3f}")
-    names = {REFINENET: f"Refine-Net (X = {pipe.full.features.n_normals})",
-             SCAN_METHODS[-1]: f"Refine-Net (X = {x8.features.n_normals})"}
+    names = {m: figure_name(m) for m in SCAN_METHODS}
     caption = ("Simulated range scans (docs/algorithm.md §1.5): unoriented angular error (degrees), mean and RMSE, "
                "and the proportion of good points (PGP5, PGP10), points pooled per category; every method through "
-               "the chain of refinenet normals, l_d from the point spacing. Refine-Net X = 9: the release; X = 8: "
-               f"variant {REAL_VARIANT}, both refining MFPS. " + scanner_line(pipe.scanner) + " " + data_line(params))
+               f"the chain of refinenet normals, l_d from the point spacing. Refine-Net: the release, X = "
+               f"{pipe.full.features.n_normals}; {names[SCAN_METHODS[-1]]}: variant {REAL_VARIANT}, X = "
+               f"{x8.features.n_normals} (without the initial normal, the paper's real-data setting); both refine "
+               "MFPS. " + " ".join(filter(None, [budget_line(pipe, names[SCAN_METHODS[-1]], "the release"),
+                                                 scanner_line(pipe.scanner), data_line(params)])))
     write_table(pd.DataFrame(rows), "synthetic", ("mean", "rmse", "pgp5", "pgp10"), caption, SCAN_TABLE,
                 Table.files(SCAN_TABLE), names)
 

@@ -105,3 +105,8 @@ def test_a_scan_is_reproducible():
 def test_a_shape_outside_the_catalogue_is_refused_by_its_key():
     with pytest.raises(ParamsError, match="scanner.shapes: 'teapot' is not a shape of the catalogue"):
         simulate_scan("teapot", COARSE, seed=0)
+
+
+def test_a_sensor_that_sees_too_little_of_the_shape_is_refused_by_its_key():
+    with pytest.raises(ParamsError, match="scanner: the shape spans about .* rays of the sensor, fewer than 1000"):
+        simulate_scan("sphere_a", replace(COARSE, range_m=500.0), seed=0)

@@ -287,7 +287,7 @@ def test_a_table_needs_its_variants():
 
 
 def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
-    """x8 (X = 8) serves the real-scan figure alone: its features of the training clouds, clusters and networks,
+    """x8 (X = 8) serves the scans alone (fig_real, table_scans): its features of the training clouds, clusters and networks,
     no test-cloud features or inference. A variant asked for in the normals figure gets its test-cloud normals and
     a column; an unknown one is reported under `figures.variants`. fig_real shows the simulated scans, or the folder
     `figures.scans` names."""

@@ -375,7 +375,7 @@ class FiguresConfig:
     """Refine-Net variants shown as columns of the normals figure after Refine-Net (fig_normals)."""
     scans: str | None
     """A folder of real scans for fig_real: point files (`data.io.POINT_FILE_SUFFIXES`) or meshes whose vertices
-    are the points; None: no real-scan figure."""
+    are the points; None: the simulated scans (params.yaml `scanner`)."""
     scan_points: int | None
     """A seeded random subset of at most this many points per scan (the smoke profile's small figure)."""
 

@@ -54,12 +54,12 @@ def split_priority(split):
 
 
 def main_page():
-    """Whether the run builds the main job's page: `snakemake main` (alone, or with files of the main job). Its
-    page shows what the main job made beside the committed results of the rest; any other run's (the default
-    target, `dvc repro`, `reports/index.html` asked for alone) shows every table and figure, made by the run.
-    Evaluated while the DAG is built, when the run's targets are known."""
+    """Whether the run builds the main job's page: `main` is among its targets (`all` is not). That page shows
+    what the main job made beside the committed results of the rest; any other run's (the default target, `dvc
+    repro`, `reports/index.html` asked for alone) shows every table and figure, made by the run. Evaluated while the
+    DAG is built, when the run's targets are known."""
     targets = set(getattr(workflow.dag_settings, "targets", ()))
-    return "main" in targets and targets <= {"main", *PIPE.main_targets()}
+    return "main" in targets and "all" not in targets
 
 
 def installed(step):

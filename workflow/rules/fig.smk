@@ -124,7 +124,6 @@ rule fig_real:
     output:
         **layout.FIGURE_REAL,
     params:
-        folder=lambda wildcards, input: P.figures.scans or os.path.dirname(input.scans[0]),
         tracked=tracked("fig_real"),
     log:
         "logs/fig/fig_real.log",
@@ -133,7 +132,7 @@ rule fig_real:
     conda:
         "../envs/refinenet.yaml"
     shell:
-        "python -m stages.fig --figure real --scans {params.folder} --clouds {input.clouds}"
+        "python -m stages.fig --figure real --scans {input.scans} --clouds {input.clouds}"
         " --clusters {input.clusters} --networks {input.networks} 2>&1 | tee {log}"
 
 

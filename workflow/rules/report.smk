@@ -1,5 +1,6 @@
 # The reports in one place: reports/index.html (every table and figure, the profile and settings that made them;
-# after `snakemake main`, the main job's beside the committed results of the rest: `main_page`) and reports/tables.tex (every table in one LaTeX document), which report_pdf compiles where pdflatex is installed.
+# after `snakemake main`, the main job's beside the committed results of the rest: `main_page`) and
+# reports/tables.tex (every table in one LaTeX document), which report_pdf compiles where pdflatex is installed.
 
 
 rule report:

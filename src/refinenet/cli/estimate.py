@@ -130,11 +130,16 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     return normals
 
 
+#: The estimators the scan figure and table compare Refine-Net with, each with a release's settings.
+COMPARED = ("pca", "jet", "mfps")
+
+
 def compared_normals(points: np.ndarray, releases: dict[str, Release]) -> dict[str, np.ndarray]:
-    """What the scan figure and table compare on one cloud, by name: PCA, Jet and MFPS with the settings of the
-    first release, then each release's Refine-Net refining those MFPS normals (l_d from the point spacing)."""
+    """What the scan figure and table compare on one cloud, by method: PCA, Jet and MFPS with the settings of the
+    first release, then each release's Refine-Net (keyed as `releases` names it) refining those MFPS normals, l_d
+    from the point spacing."""
     first = next(iter(releases.values()))
-    normals = {m: estimate_normals(points, first, m) for m in ("pca", "jet", "mfps")}
+    normals = {m: estimate_normals(points, first, m) for m in COMPARED}
     for name, release in releases.items():
         normals[name] = estimate_normals(points, release, "refinenet", initial=normals["mfps"])
     return normals

@@ -196,7 +196,7 @@ def scan_files(folder: str | Path) -> list[Path]:
     """The scans of a folder, by name."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputError(folder, "not a folder of scans (params.yaml figures.scans)")
+        raise InputError(folder, "not a folder of scans")
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in SCAN_SUFFIXES)
     if not files:
         raise InputError(folder, f"no scans here (files ending {', '.join(SCAN_SUFFIXES)})")

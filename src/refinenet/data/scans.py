@@ -19,6 +19,9 @@ from refinenet.errors import ParamsError
 #: Surface samples per ray, at least, on the nearest surface seen square-on (more where it is farther or oblique):
 #: a ray misses the front surface, and may see an occluded one through the gap, with probability exp(-8) or less.
 SAMPLES_PER_RAY = 8.0
+#: The fewest rays a shape may span (its area over the nearest footprint): a scan of fewer has too few points for
+#: any estimator's neighbourhood.
+MIN_RETURNS = 1000
 
 
 def viewpoints(sensor: ScannerConfig) -> np.ndarray:
@@ -30,16 +33,26 @@ def viewpoints(sensor: ScannerConfig) -> np.ndarray:
                             np.full(sensor.views, np.sin(elevation))]
 
 
+def check_shapes(names: tuple[str, ...]) -> None:
+    """Every scanned shape is one of the catalogue's, or a one-line error under its key."""
+    unknown = [name for name in names if name not in shapes.catalogue()]
+    if unknown:
+        raise ParamsError("scanner.shapes", f"'{unknown[0]}' is not a shape of the catalogue (data.shapes)")
+
+
 def simulate_scan(shape: str, sensor: ScannerConfig, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The points, exact unit normals and viewpoint index of every ray's return, over all viewpoints, in the
     shape's units. The same (shape, sensor, seed) gives bit-identical arrays."""
-    if shape not in shapes.catalogue():
-        raise ParamsError("scanner.shapes", f"'{shape}' is not a shape of the catalogue (data.shapes)")
+    check_shapes((shape,))
     positions = viewpoints(sensor)
     nearest = np.linalg.norm(positions[0]) - 1.0  # range of the closest possible surface point, in shape radii
     footprint = nearest * sensor.pixel_rad
     area = shapes.surface(shape).areas.sum()
-    surface, normals = shapes.sample_shape(shape, int(SAMPLES_PER_RAY * area / footprint**2), seed)
+    samples = int(SAMPLES_PER_RAY * area / footprint**2)
+    if samples < SAMPLES_PER_RAY * MIN_RETURNS:
+        raise ParamsError("scanner", f"the shape spans about {samples / SAMPLES_PER_RAY:.0f} rays of the sensor, "
+                                     f"fewer than {MIN_RETURNS}: bring it nearer or make the pixels finer")
+    surface, normals = shapes.sample_shape(shape, samples, seed)
     rng = np.random.default_rng(seed + 1)
     parts = [_view(surface, normals, position, sensor, rng) for position in positions]
     points = np.concatenate([p for p, _ in parts])

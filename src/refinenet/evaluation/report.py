@@ -138,7 +138,7 @@ def _git(*args: str) -> str | None:
 
 def caption_profile(tex: Path) -> str | None:
     """The profile a generated table's caption names (`captions.data_line`), or None."""
-    match = re.search(r"Profile (\S+?);", latex_caption(tex))
+    match = re.search(r"Profile (\w+)", latex_caption(tex))
     return match.group(1) if match else None
 
 

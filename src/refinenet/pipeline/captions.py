@@ -77,12 +77,9 @@ def caption(pipe: Pipeline, table: Table) -> str:
     compared = set(table.variants) - {FULL}
     if table.variants:
         parts.append(_refinenet_settings(pipe.params[REFERENCE if compared else FULL]))
-    budget = changes(pipe, REFERENCE)
-    if compared and budget:
-        main = asdict(pipe.full)
-        parts.append("Every variant" + (", and Refine-Net as the reference row," if REFERENCE in compared else "")
-                     + " under the variant budget: " + _settings(budget) + " (the main tables' Refine-Net: "
-                     + _settings({k: config.get(main, k) for k in budget}) + ").")
+    who = "Every variant" + (", and Refine-Net as the reference row," if REFERENCE in compared else "")
+    budget = budget_line(pipe, who, "the main tables' Refine-Net") if compared else ""
+    parts += [budget] if budget else []
     points = pipe.scored_subset(table.methods)
     if points is not None:
         parts.append(f"Every row scored on the same seeded {points} points of each test cloud.")
@@ -91,6 +88,17 @@ def caption(pipe: Pipeline, table: Table) -> str:
     if changed:
         parts.append("Variants of Refine-Net (what each changes): " + "; ".join(changed) + ".")
     return " ".join(parts)
+
+
+def budget_line(pipe: Pipeline, who: str, full: str) -> str:
+    """The sentence saying that `who` trains and infers under the variant budget, beside `full`'s values (which
+    full has); empty where there is no budget."""
+    budget = changes(pipe, REFERENCE)
+    if not budget:
+        return ""
+    main = asdict(pipe.full)
+    return (f"{who} under the variant budget: {_settings(budget)} ({full}: "
+            f"{_settings({k: config.get(main, k) for k in budget})}).")
 
 
 def _refinenet_settings(reference: Params) -> str:

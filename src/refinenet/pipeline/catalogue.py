@@ -79,23 +79,25 @@ TABLES = {
 #: [P] Table network_architecture: the networks whose height-map modules it shows, with their column titles.
 ARCHITECTURE = {FULL: "Refine-Net", "normals_hmps": "Ablation (normals&HMPs)"}
 
-#: The estimators the figures compare, one column each: PCA, Jet, MFPS and Refine-Net ([P] fig:syn and fig:insight,
-#: where the variants of params.yaml `figures.variants` follow; fig:real_boy and fig:outdoor).
+#: The estimators the normals figure compares, one column each: PCA, Jet, MFPS and Refine-Net ([P] fig:syn and
+#: fig:insight), then the variants of params.yaml `figures.variants`.
 FIGURE_METHODS = (*BASELINES, "mfps", REFINENET)
 #: The categories of the normals figure's clouds, as in fig:syn: a CAD shape with sharp edges and one with rich detail.
 FIGURE_CATEGORIES = ("SharpFeature", "RichFeature")
 #: [P] fig:cluster: the first figure cloud coloured by cluster for Kc = 2 (variant kc2) and Kc = 4 (full), beside
 #: the Kc curve of table_clusters.
 CLUSTER_FIGURE_VARIANTS = ("kc2", FULL)
-#: [P] fig:real_boy and fig:outdoor: the real scans of params.yaml `figures.scans` (no truth) in the paper's
-#: real-data setting X = 8, this variant, through the chain of `refinenet normals` (radii from the point spacing,
-#: `cli.estimate`).
+#: The paper's real-data setting (X = 8: no initial normal among the inputs), this variant: fig_real and table_scans
+#: run it on scans through the chain of `refinenet normals` (radii from the point spacing, `cli.estimate`).
 REAL_VARIANT = "x8"
 #: The simulated range scans (params.yaml `scanner`, docs/algorithm.md §1.5) have exact normals: this table scores on
 #: them PCA, Jet, MFPS and Refine-Net with X = 9 (the release) and with X = 8 (REAL_VARIANT, the paper's real-data
 #: setting), through the chain of `refinenet normals`, as [P] table:Kinect_results does on real Kinect v1 scans.
 SCAN_TABLE = "table_scans"
 SCAN_METHODS = (*BASELINES, "mfps", REFINENET, refinenet(REAL_VARIANT))
+#: [P] fig:real_boy and fig:outdoor (fig_real): the scan table's methods but the release, Refine-Net in the real-data
+#: setting alone as [P] shows it, on the simulated scans or on the real ones of params.yaml `figures.scans`.
+SCAN_FIGURE_METHODS = tuple(m for m in SCAN_METHODS if m != REFINENET)
 
 #: [P] §Application (docs/algorithm.md §11): every test cloud with a known clean surface denoised with the normals of
 #: each method, a record of its points and distances to the true surface per cloud, a table of the distances and a

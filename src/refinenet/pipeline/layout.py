@@ -53,7 +53,7 @@ FIGURE_LOSS = {"png": "reports/figures/l1_against_l2.png", "pdf": "reports/figur
 #: Training loss and validation error per epoch of every cluster, one figure per trained variant.
 FIGURE_TRAINING_DIR = "reports/figures/training"
 FIGURE_TRAINING = f"{FIGURE_TRAINING_DIR}/{{variant}}.png"
-#: [P] fig:real_boy and fig:outdoor: normals as RGB on real scans.
+#: [P] fig:real_boy and fig:outdoor: normals as RGB on scans (simulated, or a folder of real ones).
 FIGURE_REAL = {"png": "reports/figures/real_scans.png", "pdf": "reports/figures/real_scans.pdf"}
 #: [P] fig:block: a test cloud denoised with each method's normals.
 FIGURE_DENOISE = {"png": "reports/figures/denoising.png", "pdf": "reports/figures/denoising.pdf"}

@@ -1,5 +1,6 @@
-"""The report page's entries (`evaluation.report` renders them): every table and figure the run makes, the files
-each links and what each figure shows. The report step depends on exactly these files."""
+"""The report page's entries (`evaluation.report` renders them): every table and figure of the run, the files each
+links, what each figure shows and whether the run that builds the page makes it (the main job makes its own only).
+The report step depends on exactly the files of the entries the run makes."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ from refinenet.pipeline.catalogue import (
     DENOISE_METHODS,
     DENOISE_TABLE,
     FIGURE_CATEGORIES,
-    FIGURE_METHODS,
     REAL_VARIANT,
+    SCAN_FIGURE_METHODS,
     SCAN_TABLE,
     TABLES,
     Table,
@@ -68,7 +69,8 @@ def _figures(pipe: Pipeline) -> list[tuple[str, dict[str, str], str]]:
          f"{' and '.join(FIGURE_CATEGORIES)}; each panel's mean error in its title."),
         ("real_scans", layout.FIGURE_REAL,
          "[P] fig:real_boy / fig:outdoor: normals as RGB of "
-         f"{', '.join(METHOD_NAMES[m] for m in FIGURE_METHODS)} (X = 8, variant {REAL_VARIANT}) on "
+         f"{', '.join(map(figure_name, SCAN_FIGURE_METHODS))} (variant {REAL_VARIANT}: no initial normal among its "
+         "inputs, the paper's real-data setting) on "
          + (f"the real scans of {scans} (no ground truth)" if scans else "the simulated scans of table_scans")
          + ", radii from the point spacing."),
         ("clusters", layout.FIGURE_CLUSTERS,

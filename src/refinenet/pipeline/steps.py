@@ -107,13 +107,15 @@ _NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model"
             "features.patches", "evaluation.metrics")
 #: The pipeline's declarations, which a script reading the pipeline (`workflow.Pipeline`) imports together.
 _PIPELINE = ("pipeline.methods", "pipeline.layout", "pipeline.catalogue", "pipeline.variants", "pipeline.captions",
-             "pipeline.page", "pipeline.steps", "pipeline.workflow")
+             "pipeline.page", "pipeline.steps", "pipeline.workflow", "data.scans")
 _TABLE = ("evaluation.table", "evaluation.metrics", "evaluation.plots", *_PIPELINE, "estimators.baselines",
           "estimators.mfps", *_DATA, *_GEOMETRY)
-#: The figure script's (one for the fig steps; the real-scan figure runs the chain of `refinenet normals`).
-_FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geometry.orientation", "cli.estimate",
-        "estimators.strata", "network.inference", "network.release", "geometry.scale", "geometry.tiles", *_NETWORK,
-        *_TABLE, *_STAGE)
+#: The chain of `refinenet normals`, which the scan table and figure run.
+_CHAIN = ("cli.estimate", "estimators.strata", "network.inference", "network.release", "network.devices",
+          "geometry.scale", "geometry.tiles", *_NETWORK)
+#: The figure script's (one for the fig steps).
+_FIG = ("evaluation.figures", "evaluation.render", "evaluation.denoise", "geometry.orientation", *_CHAIN, *_TABLE,
+        *_STAGE)
 
 
 def declare(pipe: Pipeline) -> list[Step]:
@@ -289,7 +291,7 @@ def _scan_steps(pipe: Pipeline) -> list[Step]:
              modules=("data.scans", "data.shapes", "data.meshes", "data.noise", "data.io", *_STAGE),
              keys=("seed", "scanner"), deps=(), outs=(layout.SCANS_DIR,),
              targets=lambda: [layout.SCAN.format(shape=s) for s in pipe.scanner.shapes]),
-        _table_files(SCAN_TABLE, Table.files(SCAN_TABLE), family="scans", modules=_FIG,
+        _table_files(SCAN_TABLE, Table.files(SCAN_TABLE), family="scans", modules=(*_CHAIN, *_TABLE, *_STAGE),
                      keys=(*DATA_KEYS, "scanner", *estimated),
                      deps=(layout.SCANS_DIR, layout.RELEASE, "results/clouds/train", *x8), variant=REAL_VARIANT),
         _figure("fig_real", layout.FIGURE_REAL, ("figures.scans", "figures.scan_points", *estimated),
@@ -324,7 +326,7 @@ def _report_steps(pipe: Pipeline) -> list[Step]:
         Step(
             name="report", family="report", modules=modules,
             keys=("seed", "data", "noise", "baselines", "mfps", "features", "clustering", "network", "patches",
-                  "training", "inference", "evaluation", "denoise", "figures", "variants", "variant_budget"),
+                  "training", "inference", "evaluation", "denoise", "figures", "scanner", "variants", "variant_budget"),
             deps=tuple(dict.fromkeys(layout.FIGURE_TRAINING_DIR if p.startswith(f"{layout.FIGURE_TRAINING_DIR}/") else p
                                      for p in reported_files(pipe))),
             outs=tuple(layout.REPORT_FILES.values()), targets=lambda: list(layout.REPORT_FILES.values()),

@@ -12,7 +12,7 @@ from typing import Any
 from refinenet import config
 from refinenet.config import Params, ScannerConfig
 from refinenet.data.clouds import CloudSpec, list_clouds
-from refinenet.data.shapes import catalogue
+from refinenet.data.scans import check_shapes
 from refinenet.errors import ParamsError
 from refinenet.pipeline.catalogue import (
     ARCHITECTURE,
@@ -59,9 +59,10 @@ class Pipeline:
         self.full = self.params[FULL]
         self.scanner = ScannerConfig.from_resolved(self.resolved[FULL], source)
         """The simulated scans' sensor: a pipeline block, read from full's resolved params."""
-        unknown = [s for s in self.scanner.shapes if s not in catalogue()]
-        if unknown:
-            raise ParamsError("scanner.shapes", f"'{unknown[0]}' is not a shape of the catalogue (data.shapes)", source)
+        try:
+            check_shapes(self.scanner.shapes)
+        except ParamsError as err:
+            raise ParamsError(err.key, err.problem, source) from None
         for name, variants in [*((n, t.variants) for n, t in TABLES.items()), ("table_architecture", ARCHITECTURE),
                                ("fig_real and table_scans", [REAL_VARIANT])]:
             for v in variants:
