@@ -287,10 +287,10 @@ def test_a_table_needs_its_variants():
 
 
 def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
-    """x8 (X = 8) serves the scans alone (fig_real, table_scans): its features of the training clouds, clusters and networks,
-    no test-cloud features or inference. A variant asked for in the normals figure gets its test-cloud normals and
-    a column; an unknown one is reported under `figures.variants`. fig_real shows the simulated scans, or the folder
-    `figures.scans` names."""
+    """x8 (X = 8) serves the scans alone (fig_real, table_scans): its features of the training clouds, clusters
+    and networks, no test-cloud features or inference. A variant asked for in the normals figure gets its
+    test-cloud normals and a column; an unknown one is reported under `figures.variants`. fig_real shows the
+    simulated scans, or the folder `figures.scans` names."""
     assert {"features_x8", "clustering_x8", "training_x8"} <= set(STEPS) and "inference_x8" not in STEPS
     assert STEPS["features_x8"].outs == ("results/features/x8/train",) and STEPS["features_x8"].split == "train"
     assert all(t.startswith("results/features/x8/train/") for t in STEPS["features_x8"].targets())
