@@ -29,11 +29,12 @@ from refinenet.data.noise import add_gaussian_noise
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import load_features
 from refinenet.pipeline.bridge import produced
-from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN, SCAN_TABLE, Table
+from refinenet.pipeline.catalogue import DENOISE_TABLE, MAIN, SCAN_TABLE
 from refinenet.pipeline.catalogue import TABLES as EVALUATED
 from refinenet.pipeline.layout import (
     CHECKPOINT_DIR,
     CLOUD,
+    FIGURE_REAL,
     HISTORY,
     NETWORK,
     REFINED,
@@ -186,7 +187,7 @@ def test_the_main_jobs_page_shows_its_figures_and_every_committed_table_in_a_bro
     assert kept and len(page.tables) == len([t for t in tables if t.made]) + len(kept) and min(page.tables) >= 1
     html = (by_snakemake.parent / "main_page" / "index.html").read_text()
     assert html.count("not rebuilt by this run") == len(kept) + len(kept_figures) + 1  # and the paper comparison
-    assert f"<code>snakemake -j2 {Table.files(SCAN_TABLE)['csv']}</code>" in html
+    assert f"<code>snakemake -j2 {FIGURE_REAL['png']}</code>" in html  # no figure of x8 is committed
 
 
 def test_the_report_page_shows_every_table_and_figure_in_a_browser(by_snakemake):
@@ -302,8 +303,9 @@ def family(name: str) -> set[str]:
          family("clustering") | REFINENET_TABLES | RELEASE | TIME | {"fig_normals", "fig_clusters"} | REPORT),
         ("  batch_size: 1024\n  device", "  batch_size: 512\n  device",
          family("inference") | RELEASE | REAL | SCANS | REPORT),
-        # the simulated scans' sensor: the scans and their table (the figure follows the new scans)
-        ("  views: 3", "  views: 2", {"simulate_scans", "table_scans"}),
+        # the simulated scans' sensor: the scans, their table and the page, which shows every setting (the figure
+        # follows the new scans)
+        ("  views: 3", "  views: 2", {"simulate_scans", "table_scans"} | REPORT),
         # a variant's overrides: its training and the table naming it (its inference follows the new networks)
         ("  l1: {training: {loss: l1}}", "  l1: {training: {loss: l1, lr: 0.01}}",
          {"training_l1", "table_loss"} | REPORT),
