@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import copy
 import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -386,8 +387,9 @@ class FiguresConfig:
 @dataclass(frozen=True)
 class ScannerConfig:
     """params.yaml `scanner`: the virtual depth camera of the simulated scans (docs/algorithm.md §1.5), the clouds
-    of table_scans and, by default, of fig_real. A pipeline block like `variants`: a release neither stores nor
-    needs it. Lengths in metres, angles in radians unless named otherwise."""
+    of table_scans and, by default, of fig_real. A pipeline block like `variants`, outside `Params`: no release
+    needs it (one stores it only within the whole resolved file). Lengths in metres, angles in radians unless named
+    otherwise."""
 
     shapes: tuple[str, ...]
     """Shapes of the procedural catalogue (`data.shapes`) scanned, one scan each."""
@@ -413,14 +415,24 @@ class ScannerConfig:
 
     @classmethod
     def from_resolved(cls, params: dict[str, Any], source: str = "params.yaml") -> ScannerConfig:
-        """The block of resolved params, checked against its part of the schema."""
-        if "scanner" not in params:
-            raise ParamsError("scanner", "is missing", source)
-        validate_block("scanner", params["scanner"], source)
-        try:
-            return cls(**params["scanner"])
-        except ParamsError as err:
-            raise ParamsError(err.key, err.problem, source) from None
+        """The block of resolved params, checked as `Params.from_resolved` checks each of its blocks."""
+        _check_block("scanner", params, source)
+        return _built(lambda: cls(**params["scanner"]), source)
+
+
+def _check_block(key: str, params: dict[str, Any], source: str) -> None:
+    """The block `key` of resolved params is there and passes its part of the schema, or a one-line error."""
+    if key not in params:
+        raise ParamsError(key, "is missing", source)
+    validate_block(key, params[key], source)
+
+
+def _built(build: Callable[[], Any], source: str) -> Any:
+    """What `build` makes of checked blocks, a dataclass's own check failing as a one-line error naming `source`."""
+    try:
+        return build()
+    except ParamsError as err:
+        raise ParamsError(err.key, err.problem, source) from None
 
 
 @dataclass(frozen=True)
@@ -454,13 +466,8 @@ class Params:
                   "patches": PatchConfig, "training": TrainConfig, "inference": InferenceConfig,
                   "evaluation": EvaluationConfig, "denoise": DenoiseConfig, "figures": FiguresConfig}
         for key in ("profile", "seed", *blocks):
-            if key not in params:
-                raise ParamsError(key, "is missing", source)
-            validate_block(key, params[key], source)
-        try:
-            typed = {key: block(**params[key]) for key, block in blocks.items()}
-        except ParamsError as err:
-            raise ParamsError(err.key, err.problem, source) from None
+            _check_block(key, params, source)
+        typed = _built(lambda: {key: block(**params[key]) for key, block in blocks.items()}, source)
         return cls(profile=params["profile"], seed=params["seed"], **typed)
 
 
