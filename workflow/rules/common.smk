@@ -38,6 +38,14 @@ def files(variant, family, pattern, **values):
     return layout.fill(pattern, variant=PIPE.owner(variant, family), **values)
 
 
+def networks(variant):
+    """The network folder of every cluster of `variant`, from the variant that trains them."""
+    return [
+        files(variant, "training", layout.NETWORK, cluster=c)
+        for c in range(PIPE.params[variant].clustering.n_clusters)
+    ]
+
+
 def record_in_dvc():
     """After a plain Snakemake run, record finished steps in dvc.lock so `dvc repro` has nothing to redo.
     Skipped when DVC itself runs Snakemake (the bridge sets REFINENET_BRIDGE)."""

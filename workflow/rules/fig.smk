@@ -117,10 +117,7 @@ rule fig_real:
         scans=P.figures.scans or [layout.SCAN.format(shape=s) for s in PIPE.scanner.shapes],
         clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
         clusters=files(catalogue.REAL_VARIANT, "clustering", layout.CLUSTER_MODEL),
-        networks=[
-            files(catalogue.REAL_VARIANT, "training", layout.NETWORK, cluster=c)
-            for c in range(PIPE.params[catalogue.REAL_VARIANT].clustering.n_clusters)
-        ],
+        networks=networks(catalogue.REAL_VARIANT),
     output:
         **layout.FIGURE_REAL,
     params:

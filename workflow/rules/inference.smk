@@ -13,10 +13,7 @@ for step in PIPE.family("inference"):
             cloud=layout.CLOUD,
             features=files(step.variant, "features", layout.FEATURES),
             clusters=files(step.variant, "clustering", layout.CLUSTER_MODEL),
-            networks=[
-                files(step.variant, "training", layout.NETWORK, cluster=c)
-                for c in range(PIPE.params[step.variant].clustering.n_clusters)
-            ],
+            networks=networks(step.variant),
         output:
             layout.fill(layout.REFINED, variant=step.variant),
         params:

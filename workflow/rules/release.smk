@@ -9,7 +9,7 @@ rule release:
         code=PIPE.steps["release"].code,
         clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
         clusters=layout.CLUSTER_MODEL.format(variant=FULL),
-        networks=[layout.NETWORK.format(variant=FULL, cluster=c) for c in range(P.clustering.n_clusters)],
+        networks=networks(FULL),
         check_clouds=[layout.CLOUD.format(cloud=key) for key in check_keys(P)],
         check_features=[layout.FEATURES.format(variant=FULL, cloud=key) for key in check_keys(P)],
     output:

@@ -11,10 +11,7 @@ rule table_scans:
         release=layout.RELEASE,
         clouds=[layout.CLOUD.format(cloud=key) for key in TRAIN_KEYS],
         clusters=files(catalogue.REAL_VARIANT, "clustering", layout.CLUSTER_MODEL),
-        networks=[
-            files(catalogue.REAL_VARIANT, "training", layout.NETWORK, cluster=c)
-            for c in range(PIPE.params[catalogue.REAL_VARIANT].clustering.n_clusters)
-        ],
+        networks=networks(catalogue.REAL_VARIANT),
     output:
         **catalogue.Table.files(catalogue.SCAN_TABLE),
     params:
