@@ -35,13 +35,10 @@ def main(params, args):
     main_job = args.scope == "main"
     tables, figures = reported(pipe, main_job)
     root = Path(REPORT_DIR)
-    origins, absent = {}, []
-    for entry, path in [*((t, t.csv) for t in tables), *((f, f.png) for f in figures)]:
-        if not entry.made and (root / path).is_file():
-            profile = caption_profile(root / entry.tex) if getattr(entry, "tex", None) else None
-            origins[entry.name] = origin(root / path, profile)
-        elif not entry.made:
-            absent.append(entry)
+    origins = {t.name: origin(root / t.csv, caption_profile(root / t.tex) if t.tex else None) for t in tables
+               if not t.made and (root / t.csv).is_file()}
+    origins |= {f.name: origin(root / f.png, None) for f in figures if not f.made and (root / f.png).is_file()}
+    absent = [e for e in (*tables, *figures) if not e.made and e.name not in origins]
     tables = [t for t in tables if t not in absent]
     figures = [f for f in figures if f not in absent]
     notes = {}

@@ -1,7 +1,8 @@
-"""table_scans: the unoriented angular error of PCA, Jet, MFPS and Refine-Net with X = 9 (the release) and X = 8
-(the paper's real-data setting) on every simulated scan (docs/algorithm.md §1.5), through the chain of `refinenet
-normals` (l_d from the point spacing): mean, RMSE, PGP5 and PGP10 per category of the scanned shapes, points
-pooled. The quantitative form of [P] table:Kinect_results, on clouds with exact normals."""
+"""table_scans: the unoriented angular error of PCA, Jet, MFPS and Refine-Net, both the release and variant x8 (no
+initial normal among its inputs, the paper's real-data setting), on every simulated scan (docs/algorithm.md §1.5),
+through the chain of `refinenet normals` (l_d from the point spacing): mean, RMSE, PGP5 and PGP10 per category of
+the scanned shapes, points pooled. The quantitative form of [P] table:Kinect_results, on clouds with exact
+normals."""
 
 from pathlib import Path
 
@@ -18,16 +19,16 @@ from refinenet.network.release import Release, load_release
 from refinenet.pipeline import stage
 from refinenet.pipeline.captions import budget_line, data_line, scanner_line
 from refinenet.pipeline.catalogue import REAL_VARIANT, SCAN_METHODS, SCAN_TABLE, Table
-from refinenet.pipeline.methods import REFINENET, figure_name
+from refinenet.pipeline.methods import REFINENET, figure_name, refinenet
 from refinenet.pipeline.workflow import Pipeline
 
 
 def arguments(parser):
     parser.add_argument("--scans", nargs="+", required=True, help="the simulated scans (.ply)")
-    parser.add_argument("--release", required=True, help="the release folder (X = 9)")
+    parser.add_argument("--release", required=True, help="the release folder")
     parser.add_argument("--clouds", nargs="+", required=True, help="the training clouds (their spacing)")
-    parser.add_argument("--clusters", required=True, help="the X = 8 variant's cluster model")
-    parser.add_argument("--networks", nargs="+", required=True, help="the X = 8 variant's network folders")
+    parser.add_argument("--clusters", required=True, help="variant x8's cluster model")
+    parser.add_argument("--networks", nargs="+", required=True, help="variant x8's network folders")
 
 
 def main(params, args):
@@ -35,7 +36,7 @@ def main(params, args):
     x8 = pipe.params[REAL_VARIANT]
     training = [read_cloud(path).points for path in args.clouds]
     releases = {REFINENET: load_release(args.release, device=resolve_device(pipe.full.inference.device)),
-                SCAN_METHODS[-1]: Release.of_run(x8, args.clusters, args.networks, training)}
+                refinenet(REAL_VARIANT): Release.of_run(x8, args.clusters, args.networks, training)}
     shapes, rows = catalogue(), []
     least = min_points(x8, REFINENET, refine_initial=False)
     for path in map(Path, args.scans):
@@ -48,9 +49,9 @@ def main(params, args):
     caption = ("Simulated range scans (docs/algorithm.md §1.5): unoriented angular error (degrees), mean and RMSE, "
                "and the proportion of good points (PGP5, PGP10), points pooled per category; every method through "
                f"the chain of refinenet normals, l_d from the point spacing. Refine-Net: the release, X = "
-               f"{pipe.full.features.n_normals}; {names[SCAN_METHODS[-1]]}: variant {REAL_VARIANT}, X = "
+               f"{pipe.full.features.n_normals}; {names[refinenet(REAL_VARIANT)]}: variant {REAL_VARIANT}, X = "
                f"{x8.features.n_normals} (without the initial normal, the paper's real-data setting); both refine "
-               "MFPS. " + " ".join(filter(None, [budget_line(pipe, names[SCAN_METHODS[-1]], "the release"),
+               "MFPS. " + " ".join(filter(None, [budget_line(pipe, names[refinenet(REAL_VARIANT)], "the release"),
                                                  scanner_line(pipe.scanner), data_line(params)])))
     write_table(pd.DataFrame(rows), "synthetic", ("mean", "rmse", "pgp5", "pgp10"), caption, SCAN_TABLE,
                 Table.files(SCAN_TABLE), names)

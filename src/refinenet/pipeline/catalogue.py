@@ -91,8 +91,8 @@ CLUSTER_FIGURE_VARIANTS = ("kc2", FULL)
 #: run it on scans through the chain of `refinenet normals` (radii from the point spacing, `cli.estimate`).
 REAL_VARIANT = "x8"
 #: The simulated range scans (params.yaml `scanner`, docs/algorithm.md §1.5) have exact normals: this table scores on
-#: them PCA, Jet, MFPS and Refine-Net with X = 9 (the release) and with X = 8 (REAL_VARIANT, the paper's real-data
-#: setting), through the chain of `refinenet normals`, as [P] table:Kinect_results does on real Kinect v1 scans.
+#: them PCA, Jet, MFPS and Refine-Net, the release and REAL_VARIANT (the paper's real-data setting), through the chain
+#: of `refinenet normals`, as [P] table:Kinect_results does on real Kinect v1 scans.
 SCAN_TABLE = "table_scans"
 SCAN_METHODS = (*BASELINES, "mfps", REFINENET, refinenet(REAL_VARIANT))
 #: [P] fig:real_boy and fig:outdoor (fig_real): the scan table's methods but the release, Refine-Net in the real-data

@@ -282,8 +282,8 @@ def _figure_steps(pipe: Pipeline) -> list[Step]:
 
 def _scan_steps(pipe: Pipeline) -> list[Step]:
     """The simulated scans, their table and the scan figure (on a user's folder of scans where `figures.scans`
-    names one). The table and figure run the chain of `refinenet normals` (cli.estimate) with the X = 8 variant's
-    networks; the table also with the release's (X = 9)."""
+    names one). The table and figure run the chain of `refinenet normals` (cli.estimate) with variant x8's
+    networks; the table also with the release's."""
     x8 = (pipe.variant_dir("clustering", REAL_VARIANT, ""), pipe.variant_dir("training", REAL_VARIANT, ""))
     estimated = ("baselines", "mfps", "features", "network", "patches", "inference", "seed")
     return [
