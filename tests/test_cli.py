@@ -173,11 +173,18 @@ def test_command_refines_a_noisy_cad_shape_and_orients_it_outwards(tmp_path):
     from refinenet.data.io import write_ply
 
     write_ply(source, points)
-    run = cli("normals", source, "-o", out)
+    run = cli("normals", source, "-o", out, "--timings", tmp_path / "stages.json")
     assert run.returncode == 0, run.stderr
     normals = read_cloud(out).normals
     assert (np.einsum("ij,ij->i", normals, outward) > 0).mean() >= 0.99
     assert unoriented_angles(normals, outward).mean() < unoriented_angles(pca_normals(points, 100), outward).mean()
+    timings = json.loads((tmp_path / "stages.json").read_text())
+    stages = timings["stages"]
+    assert list(stages) == ["release", "read", "strata rule", "layout", "mfps", "smooth jet", "filtered normals",
+                            "height maps", "patches", "network", "orientation", "write"]
+    assert timings["points"] == 10_000 and timings["strata"] == 1
+    assert stages["network"]["calls"] == stages["patches"]["calls"] - 1 >= 10  # a batch of 1024 per call at most
+    assert 0.5 * timings["wall_s"] < sum(s["wall_s"] for s in stages.values()) <= timings["wall_s"]
 
 
 def test_command_refines_the_normals_of_another_estimator(tmp_path, release):
@@ -224,6 +231,8 @@ def test_console_script_is_installed():
     (["-o", "{tmp}/out.ply", "--strata", "many"], "--strata: must be 'auto' or a whole number of at least 1"),
     (["-o", "{tmp}/out.ply", "--release", "{tmp}"], "no trained networks here"),
     (["-o", "{tmp}/few.xyz"], "few.xyz"),
+    (["-o", "{tmp}/out.ply", "--timings", "{tmp}/stages.txt"], "--timings writes JSON: name a .json file"),
+    (["-o", "{tmp}/out.ply", "--timings", str(SHIPPED / "model_card.json")], "model_card.json"),
 ])
 def test_bad_arguments_fail_in_one_line_and_write_nothing(tmp_path, args, problem):
     source = tmp_path / "few.xyz"

@@ -1,8 +1,14 @@
 """Native thread limits (BLAS, OpenMP, numba): they read their thread count once, when first imported, so it must
 be set in the environment before anything imports numpy. This module imports nothing that does. Calls that take a
-thread count of their own (scipy's k-d tree `workers`) ask `native_threads`."""
+thread count of their own (scipy's k-d tree `workers`, `thread_map`) ask `native_threads`."""
 
 import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")
 
@@ -21,3 +27,15 @@ def native_threads() -> int:
     if limit.isdigit() and int(limit) > 0:
         return int(limit)
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def thread_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = None) -> list[R]:
+    """`fn` over `items`, results in order, on `threads` threads (default `native_threads`) when there are several:
+    numpy's loops, LAPACK and the nogil numba kernels release the GIL, so the chunks of a cloud run in parallel.
+    Each chunk's rows depend on that chunk alone, so results do not depend on the thread count."""
+    items = list(items)
+    threads = min(native_threads() if threads is None else threads, len(items))
+    if threads <= 1:
+        return [fn(item) for item in items]
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        return list(pool.map(fn, items))

@@ -27,6 +27,7 @@ from refinenet.geometry.scale import neighbour_distance, spacing_unit
 from refinenet.geometry.tiles import Tile, tiles
 from refinenet.network.inference import refine_normals
 from refinenet.network.release import Release
+from refinenet.profiling import stage
 
 METHODS = ("refinenet", "mfps", "pca", "jet")
 SCALES = ("spacing", "diagonal")
@@ -99,27 +100,36 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
         for rows in tqdm(strata(len(points), n_strata), desc="strata", unit="stratum", disable=not progress):
             normals[rows] = estimate_normals(points[rows], release, method, None if initial is None else initial[rows],
                                              scale, device, tile_points, workers, False, n_strata=1)
-        return consensus(points, normals, consensus_k(n_strata)) if reconcile else normals
+        if not reconcile:
+            return normals
+        with stage("consensus"):
+            return consensus(points, normals, consensus_k(n_strata))
     params = release.params
-    tree = build_tree(points)
-    length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)
     runs_mfps = method == "mfps" or (method == "refinenet" and initial is None)
-    margin = _margin(points, tree, params, method, runs_mfps, length) if len(points) > tile_points else 0.0
-    layout = list(tiles(points, tile_points, margin))
-    del tree
-    candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
-    tiled_jet = method == "refinenet" and params.features.smooth_jet is not None and len(layout) > 1
-    noise = _noise(points, layout, progress) if tiled_jet else None
+    with stage("layout"):
+        tree = build_tree(points)
+        length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)
+        margin = _margin(points, tree, params, method, runs_mfps, length) if len(points) > tile_points else 0.0
+        layout = list(tiles(points, tile_points, margin))
+        del tree
+        candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
+        tiled_jet = method == "refinenet" and params.features.smooth_jet is not None and len(layout) > 1
+        noise = _noise(points, layout, progress) if tiled_jet else None
     inference = replace(params.inference, device=device)
     normals = np.empty_like(points)
     inner = progress and len(layout) == 1
     for tile in tqdm(layout, desc="tiles", unit="tile", disable=not progress or len(layout) == 1):
         sub, rows = points[tile.ids], tile.own_rows
         if method in ("pca", "jet"):
-            normals[tile.own] = baseline_normals(sub, method, params.baselines, None)[rows]
+            with stage(method):
+                normals[tile.own] = baseline_normals(sub, method, params.baselines, None)[rows]
             continue
-        start = initial[tile.ids] if initial is not None else mfps_normals(
-            sub, params.mfps, inner, workers, length=length, ids=tile.ids, candidacy=candidacy)
+        if initial is not None:
+            start = initial[tile.ids]
+        else:
+            with stage("mfps"):
+                start = mfps_normals(sub, params.mfps, inner, workers, length=length, ids=tile.ids,
+                                     candidacy=candidacy)
         if method == "mfps":
             normals[tile.own] = start[rows]
             continue

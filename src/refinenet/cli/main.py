@@ -7,6 +7,7 @@ before they start, and `refinenet --help` answers at once.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import signal
@@ -117,6 +118,8 @@ def parser() -> argparse.ArgumentParser:
                          help="points per spatial tile; larger clouds are processed tile by tile (default 500000)")
     normals.add_argument("--release", metavar="FOLDER", help="a release exported by `snakemake release` "
                                                              "(default: the networks shipped with the package)")
+    normals.add_argument("--timings", metavar="FILE.json", help="also write the wall and CPU seconds of each stage "
+                                                                "(reading, MFPS, features, network, ...) to this file")
     normals.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     denoise = commands.add_parser("denoise", help="denoise a point cloud along its normals (docs/algorithm.md §11)",
                                   formatter_class=argparse.RawDescriptionHelpFormatter, epilog=EXAMPLES)
@@ -188,18 +191,22 @@ def normals(args: argparse.Namespace) -> int:
     import numpy as np
     import torch
 
-    from refinenet.atomic import atomic_group
+    from refinenet.atomic import atomic_group, write_text
     from refinenet.cli.estimate import TILE_POINTS, auto_strata, estimate_normals, min_points
     from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, output_files, read_cloud, write_points
     from refinenet.errors import InputError
     from refinenet.geometry.orientation import orient_mst, orient_viewpoint
     from refinenet.network.devices import resolve_device, resolve_precision
+    from refinenet.profiling import recording, stage
 
     start = time.perf_counter()
     torch.set_num_threads(args.threads)
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
     output = Path(args.output)
-    _check_outputs(args, output_files(output), initial=args.initial)
+    timings = Path(args.timings) if args.timings else None
+    if timings is not None and timings.suffix.lower() != ".json":
+        raise InputError(timings, "--timings writes JSON: name a .json file")
+    _check_outputs(args, output_files(output) + ([timings] if timings else []), initial=args.initial)
     if args.initial and args.method != "refinenet":
         raise InputError(args.initial, f"--initial is refined by Refine-Net; it cannot be used with --method "
                                        f"{args.method}")
@@ -213,26 +220,37 @@ def normals(args: argparse.Namespace) -> int:
         raise InputError("--device", str(err)) from None
     precision = resolve_precision(args.precision, device)
     device = str(device)
-    release = _release(args, device, with_networks=args.method == "refinenet", precision=precision)
-    needed = min_points(release.params, args.method, args.initial is not None)
-    cloud = read_cloud(args.input, min_points=needed)
-    initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
-    progress = sys.stderr.isatty()
-    if args.strata == "auto":
-        n_strata = auto_strata(cloud.points, release, args.method, initial is not None)
-    elif len(cloud) // int(args.strata) < needed:
-        raise InputError("--strata", f"{args.strata} subsets of {len(cloud):,} points have fewer than the {needed} "
-                                     f"points of {args.method}'s largest neighbourhood")
-    else:
-        n_strata = int(args.strata)
-    result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
-                              args.tile_points or TILE_POINTS, args.threads, progress, n_strata)
-    if args.orient == "mst":
-        result = orient_mst(cloud.points, result)
-    elif args.orient == "viewpoint":
-        result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
-    with atomic_group(_written):
-        write_points(output, cloud.points, result)
+    with recording() as stages:
+        with stage("release"):
+            release = _release(args, device, with_networks=args.method == "refinenet", precision=precision)
+        needed = min_points(release.params, args.method, args.initial is not None)
+        with stage("read"):
+            cloud = read_cloud(args.input, min_points=needed)
+            initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
+        progress = sys.stderr.isatty()
+        if args.strata == "auto":
+            with stage("strata rule"):
+                n_strata = auto_strata(cloud.points, release, args.method, initial is not None)
+        elif len(cloud) // int(args.strata) < needed:
+            raise InputError("--strata", f"{args.strata} subsets of {len(cloud):,} points have fewer than the "
+                                         f"{needed} points of {args.method}'s largest neighbourhood")
+        else:
+            n_strata = int(args.strata)
+        result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
+                                  args.tile_points or TILE_POINTS, args.threads, progress, n_strata)
+        with stage("orientation"):
+            if args.orient == "mst":
+                result = orient_mst(cloud.points, result)
+            elif args.orient == "viewpoint":
+                result = orient_viewpoint(cloud.points, result, np.asarray(args.viewpoint))
+        with atomic_group(_written):
+            with stage("write"):
+                write_points(output, cloud.points, result)
+            if timings is not None:
+                write_text(timings, json.dumps({
+                    "input": args.input, "points": len(cloud), "method": args.method, "precision": precision,
+                    "strata": n_strata, "threads": args.threads, "device": device,
+                    "wall_s": time.perf_counter() - start, "stages": stages}, indent=1) + "\n")
     how = f"{precision} features, " if args.method == "refinenet" else ""
     how += f"{n_strata} strata, " if n_strata > 1 else ""
     print(f"{output}: {len(cloud):,} points, {args.method} normals ({how}{args.orient} orientation) in "

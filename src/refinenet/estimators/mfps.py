@@ -21,7 +21,6 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 
@@ -33,6 +32,7 @@ from refinenet.config import MFPSConfig
 from refinenet.data.io import check_array
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.neighbors import chunks, covariances, knn, smallest_eigenvectors
+from refinenet.threads import thread_map
 
 #: The two methods of the step: MFPS and its "simple MFPS" ablation, both from one set of fitted patches.
 METHODS = ("mfps", "simple_mfps")
@@ -299,7 +299,7 @@ def fit_patches(points: np.ndarray, neighbours: np.ndarray, centres: np.ndarray,
         return result
 
     slices = [slice(s, min(s + step, len(centres))) for s in range(0, len(centres), step)]
-    parts = _map(run, slices, workers)
+    parts = thread_map(run, slices, workers)
     offsets = np.cumsum([0] + [len(p[0]) for p in parts[:-1]], dtype=np.int32)
     return PatchFits(
         centres=centres,
@@ -363,15 +363,6 @@ def _four_point_planes(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     dev = [x[:, j] - m for j in range(3)] + [-m]  # the 4 points about their centroid
     cov = [sum(v[i] * v[j] for v in dev) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))]
     return m, np.stack(smallest_eigenvectors_3x3(*cov))
-
-
-def _map(fn: Callable[[slice], tuple[np.ndarray, ...]], items: list[slice],
-         workers: int) -> list[tuple[np.ndarray, ...]]:
-    """`fn` over `items` in order, on a thread pool when workers > 1 (numpy releases the GIL in its loops)."""
-    if workers <= 1:
-        return [fn(item) for item in items]
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        return list(pool.map(fn, items))
 
 
 def _concat(parts: Iterable[np.ndarray], empty_shape: tuple[int, ...], dtype: type) -> np.ndarray:

@@ -8,7 +8,6 @@ are cheap.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,8 @@ from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames, target_sign
 from refinenet.geometry.neighbors import build_tree
+from refinenet.profiling import stage
+from refinenet.threads import thread_map
 
 #: Points per height-map call: the unit of the progress bar (height_maps bounds its own memory per call).
 HEIGHT_STEP = 10_000
@@ -87,27 +88,37 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     """
     points = np.asarray(points, dtype=np.float64)
     if config.smooth_jet is not None:
-        initial_normals = smooth_jet_normals(points, initial_normals, config.smooth_jet, noise)
+        with stage("smooth jet"):
+            initial_normals = smooth_jet_normals(points, initial_normals, config.smooth_jet, noise)
     length = bbox_diagonal(points) if length is None else length
     rows = np.arange(len(points)) if centres is None else np.asarray(centres)
-    nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
-                          sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
-    nf = np.hstack([nf, *(wide_normals(points, nf[:, :3], method, k) for method, k in config.wide_normals)])
-    frames = normal_frames(nf, config.frame_mode)
+    with stage("filtered normals"):
+        nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
+                              sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
+        nf = np.hstack([nf, *(wide_normals(points, nf[:, :3], method, k) for method, k in config.wide_normals)])
+        frames = normal_frames(nf, config.frame_mode)
+    with stage("height maps"):
+        heights = _height_maps(points, nf, frames, config, length, rows, workers, progress)
+    return Features(nf=nf[rows], frames=frames[rows].astype(np.float32), heights=heights,
+                    centres=None if centres is None else rows)
+
+
+def _height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, config: FeatureConfig, length: float,
+                 rows: np.ndarray, workers: int, progress: bool) -> np.ndarray:
+    """Stage F for the points `rows`, in steps of HEIGHT_STEP points over `workers` threads."""
     tree = build_tree(points)
     extent = None if config.hmp_extent is None else config.hmp_extent * length
     heights = np.empty((len(rows), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
 
-    def fill(part: slice) -> None:
-        heights[part] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
-                                    tree=tree, index=rows[part])
-
     steps = [slice(start, start + HEIGHT_STEP) for start in range(0, len(rows), HEIGHT_STEP)]
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for _ in tqdm(pool.map(fill, steps), total=len(steps), desc="height maps", disable=not progress):
-            pass
-    return Features(nf=nf[rows], frames=frames[rows].astype(np.float32), heights=heights,
-                    centres=None if centres is None else rows)
+    with tqdm(total=len(steps), desc="height maps", disable=not progress) as bar:
+        def fill(part: slice) -> None:
+            heights[part] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
+                                        tree=tree, index=rows[part])
+            bar.update()
+
+        thread_map(fill, steps, workers)
+    return heights
 
 
 def wide_normals(points: np.ndarray, n_first: np.ndarray, method: str, k: int) -> np.ndarray:

@@ -22,6 +22,7 @@ from refinenet.network.dataset import make_inputs, prepare
 from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.model import NetworkConfig, RefineNet, for_inference
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
+from refinenet.profiling import stage
 
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,
@@ -40,7 +41,8 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
     unknown = sorted(set(networks) - set(range(cluster_model.n_clusters)))
     if unknown:
         raise ValueError(f"networks for clusters {unknown}, but the cluster model has {cluster_model.n_clusters}")
-    cloud = prepare(points, features, cluster_model, centres=features.centres, length=length)
+    with stage("patches"):
+        cloud = prepare(points, features, cluster_model, centres=features.centres, length=length)
     normals = features.n_first.astype(np.float32)
     rng = np.random.default_rng(seed)
     members = {c: np.flatnonzero(cloud.clusters == c) for c in sorted(networks)}
@@ -51,8 +53,10 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
             net = networks[c].to(device).eval()
             for start in range(0, len(index), batch_size):
                 batch = index[start:start + batch_size]
-                inputs = make_inputs(cloud, batch, patch, net.config, rng)
-                local = net(*inputs.tensors(device)).float().cpu().numpy()
+                with stage("patches"):
+                    inputs = make_inputs(cloud, batch, patch, net.config, rng).tensors(device)
+                with stage("network"):
+                    local = net(*inputs).float().cpu().numpy()
                 normals[batch] = to_world(features.frames[batch], local)
                 bar.update(len(batch))
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
