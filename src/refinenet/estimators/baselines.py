@@ -10,6 +10,7 @@ import numpy as np
 from refinenet.config import BaselineConfig
 from refinenet.data.shapes import BIG_NOISE
 from refinenet.geometry.neighbors import build_tree, chunks, covariances, knn, knn_covariances, smallest_eigenvectors
+from refinenet.threads import thread_map
 
 METHODS = ("pca", "jet")
 
@@ -59,7 +60,8 @@ def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.nd
     Each neighbourhood is expressed in its PCA frame centred on the query point, scaled to unit size, and
     fitted with z = sum a_ij x^i y^j; the normal at the origin is (-a_x, -a_y, 1) mapped back to world. The
     residual's squares are divided by k minus the number of coefficients (at least 1; an exact fit has none), so
-    that on a noisy plane it estimates the noise's standard deviation.
+    that on a noisy plane it estimates the noise's standard deviation. Chunks of neighbourhoods are fitted on
+    `native_threads` threads.
     """
     n_coef = (degree + 1) * (degree + 2) // 2
     m, k = idx.shape
@@ -68,7 +70,8 @@ def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.nd
     _, covs = covariances(points, idx)
     _, frames = np.linalg.eigh(covs)  # columns: normal-like axis first, then the two tangent axes
     normals, residuals = np.empty((m, 3)), np.empty(m)
-    for sl in chunks(m, k):
+
+    def fit(sl: slice) -> None:
         local = points[idx[sl]] - points[idx[sl, 0], None, :]
         uvw = np.einsum("nkj,nji->nki", local, frames[sl])  # coordinates along (e1, e2, e3)
         scale = np.linalg.norm(uvw, axis=2).max(axis=1)[:, None]
@@ -83,4 +86,6 @@ def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.nd
         normals[sl] = world / np.linalg.norm(world, axis=1, keepdims=True)
         heights = z - np.einsum("nki,ni->nk", a, coef)
         residuals[sl] = scale[:, 0] * np.sqrt((heights ** 2).sum(axis=1) / max(k - n_coef, 1))
+
+    thread_map(fit, chunks(m, k))
     return normals, residuals
