@@ -20,6 +20,7 @@ from refinenet.network.model import (
     example_inputs,
     for_inference,
     fuse_batch_norm,
+    inference_layout,
     max_pool_linear_bn,
     preset,
     quaternion_to_matrix,
@@ -319,6 +320,22 @@ def test_runs_on_cuda_under_no_grad():
     torch.testing.assert_close(out.cpu(), reference, rtol=0, atol=5e-3)  # cuDNN convolutions may use TF32
 
 
+def test_the_inference_layout_computes_what_the_training_layout_does():
+    """Chunks of 64 patches and channels-last height maps: 150 patches (two full chunks and a part) give the
+    normals of the whole batch at once, up to float32 rounding."""
+    torch.manual_seed(0)
+    model = RefineNet(preset("release"))
+    for seed in range(3):
+        model(*_inputs(model.config, 16, seed=seed))
+    model.eval()
+    inputs = _inputs(model.config, 150)
+    with torch.no_grad():
+        reference = model(*inputs)
+        laid_out = inference_layout(model)(*inputs)
+    assert model.point_module.chunk == 64 and model.height_map_module.memory_format == torch.channels_last
+    torch.testing.assert_close(laid_out, reference, rtol=0, atol=1e-5)
+
+
 @pytest.mark.parametrize("fuse, precision", [(True, "bfloat16"), (True, "float32"), (False, "bfloat16")])
 def test_in_place_preparation_equals_the_copies(fuse, precision):
     """`for_inference` changes the loaded network itself and computes exactly what the copying forms give."""
@@ -327,7 +344,7 @@ def test_in_place_preparation_equals_the_copies(fuse, precision):
     for seed in range(3):  # non-trivial BN statistics
         model(*_inputs(model.config, 16, seed=seed))
     model.eval()
-    copied = reduced_precision(fuse_batch_norm(model) if fuse else model, precision)
+    copied = inference_layout(reduced_precision(fuse_batch_norm(model) if fuse else model, precision))
     in_place = for_inference(model, fuse, precision)
     assert in_place is model
     inputs = _inputs(model.config, 8)
