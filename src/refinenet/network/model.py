@@ -278,7 +278,7 @@ class PointModule(nn.Module):
         """True: every MLP layer runs on every point, then the max-pool (the definition, which
         `max_pool_linear_bn` equals; used where each layer's output must be seen, as by `architecture_table`)."""
         self.chunk: int | None = None
-        """Patches the MLP and max-pool take at a time (None: the whole batch); set by `for_inference`."""
+        """Patches the MLP and max-pool take at a time (None: the whole batch); set by `inference_layout`."""
 
     def forward(self, points: Tensor) -> Tensor:
         # The MLP may compute in a lower precision than the head (`reduced_precision`); the max-pool is exact in
@@ -315,7 +315,7 @@ class HeightMapModule(nn.Sequential):
         super().__init__(*convs, nn.Flatten(), *_fc((flat, *hidden, out_dim), dropout))
         self.n_convolutional = len(convs)
         self.memory_format = torch.contiguous_format
-        """Of the maps through the convolutions; set by `for_inference`."""
+        """Of the maps through the convolutions; set by `inference_layout`."""
 
     def forward(self, heights: Tensor) -> Tensor:
         # The convolutions may compute in a lower precision than the FC head (`reduced_precision`).
