@@ -98,7 +98,7 @@ def gpus(device: str) -> int:
 
 
 #: Library modules the stage scripts import, in groups (a test checks every script against its step's list).
-_STAGE = ("config", "errors", "atomic", "interrupts", "threads", "allocator", "pipeline.stage")
+_STAGE = ("config", "errors", "atomic", "interrupts", "threads", "allocator", "profiling", "pipeline.stage")
 _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn", "geometry.ball")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
