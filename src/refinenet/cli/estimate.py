@@ -10,7 +10,7 @@ gives its points the normals the whole cloud gives them.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from tqdm import tqdm
@@ -95,49 +95,97 @@ def estimate_normals(points: np.ndarray, release: Release, method: str = "refine
     points = np.ascontiguousarray(points, dtype=np.float64)
     if n_strata is None:
         n_strata = auto_strata(points, release, method, initial is not None)
-    if n_strata > 1:
-        normals = np.empty_like(points)
-        for rows in tqdm(strata(len(points), n_strata), desc="strata", unit="stratum", disable=not progress):
-            normals[rows] = estimate_normals(points[rows], release, method, None if initial is None else initial[rows],
-                                             scale, device, tile_points, workers, False, n_strata=1)
-        if not reconcile:
-            return normals
-        with stage("consensus"):
-            return consensus(points, normals, consensus_k(n_strata))
+    normals = np.empty_like(points)
+    for rows in tqdm(stratum_rows(len(points), n_strata), desc="strata", unit="stratum",
+                     disable=not progress or n_strata == 1):
+        sub, given = stratum_cloud(points, initial, rows, n_strata)
+        shared, layout = cloud_layout(sub, release, method, initial is not None, scale, tile_points,
+                                      progress and n_strata == 1)
+        inner = progress and n_strata == 1 and len(layout) == 1
+        for tile in tqdm(layout, desc="tiles", unit="tile", disable=not progress or n_strata > 1 or len(layout) == 1):
+            normals[rows[tile.own]] = tile_normals(sub, tile, shared, release, method, given, device, workers, inner)
+    return reconciled(points, normals, n_strata) if reconcile else normals
+
+
+def stratum_cloud(points: np.ndarray, initial: np.ndarray | None, rows: np.ndarray,
+                  n_strata: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """The points and initial normals of the stratum `rows` (for one stratum the whole cloud's, not copied)."""
+    if n_strata == 1:
+        return points, initial
+    return points[rows], None if initial is None else initial[rows]
+
+
+def stratum_rows(n_points: int, n_strata: int) -> list[np.ndarray]:
+    """The rows of each stratum: `estimators.strata.strata`, or all rows for one."""
+    return strata(n_points, n_strata) if n_strata > 1 else [np.arange(n_points)]
+
+
+def reconciled(points: np.ndarray, normals: np.ndarray, n_strata: int) -> np.ndarray:
+    """The normals of the strata reconciled by `estimators.strata.consensus` (one stratum's as they are)."""
+    if n_strata == 1:
+        return normals
+    with stage("consensus"):
+        return consensus(points, normals, consensus_k(n_strata))
+
+
+@dataclass(frozen=True)
+class CloudLayout:
+    """What every tile of one cloud (or stratum) takes from the whole of it: how the cloud is cut (own points per
+    tile, margin), the length unit l_d, MFPS's candidacy and the smooth-point jet's noise (None where the method
+    or a single tile does not need them)."""
+
+    tile_points: int
+    margin: float
+    length: float
+    candidacy: Candidacy | None = None
+    noise: float | None = None
+
+    def tiles(self, points: np.ndarray) -> list[Tile]:
+        """The tiles of `points`, the cloud this layout was made for: the same every time."""
+        return list(tiles(points, self.tile_points, self.margin))
+
+
+def cloud_layout(points: np.ndarray, release: Release, method: str, given_initial: bool, scale: str = "spacing",
+                 tile_points: int = TILE_POINTS, progress: bool = False) -> tuple[CloudLayout, list[Tile]]:
+    """The layout of a cloud estimated as one stratum by `method`, and its tiles."""
     params = release.params
-    runs_mfps = method == "mfps" or (method == "refinenet" and initial is None)
+    runs_mfps = method == "mfps" or (method == "refinenet" and not given_initial)
     with stage("layout"):
         tree = build_tree(points)
         length = spacing_unit(points, release.spacing_ratio, tree) if scale == "spacing" else bbox_diagonal(points)
         margin = _margin(points, tree, params, method, runs_mfps, length) if len(points) > tile_points else 0.0
-        layout = list(tiles(points, tile_points, margin))
         del tree
-        candidacy = _candidacy(points, layout, params, progress) if runs_mfps and len(layout) > 1 else None
-        tiled_jet = method == "refinenet" and params.features.smooth_jet is not None and len(layout) > 1
-        noise = _noise(points, layout, progress) if tiled_jet else None
-    inference = replace(params.inference, device=device)
-    normals = np.empty_like(points)
-    inner = progress and len(layout) == 1
-    for tile in tqdm(layout, desc="tiles", unit="tile", disable=not progress or len(layout) == 1):
-        sub, rows = points[tile.ids], tile.own_rows
-        if method in ("pca", "jet"):
-            with stage(method):
-                normals[tile.own] = baseline_normals(sub, method, params.baselines, None)[rows]
-            continue
-        if initial is not None:
-            start = initial[tile.ids]
-        else:
-            with stage("mfps"):
-                start = mfps_normals(sub, params.mfps, inner, workers, length=length, ids=tile.ids,
-                                     candidacy=candidacy)
-        if method == "mfps":
-            normals[tile.own] = start[rows]
-            continue
-        features = compute_features(sub, start, params.features, inner, length=length, centres=rows,
-                                    workers=workers, noise=noise)
-        normals[tile.own] = refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
-                                           inference, progress=inner, length=length)
-    return normals
+        shared = CloudLayout(tile_points, margin, length)
+        layout = shared.tiles(points)
+        if len(layout) > 1 and runs_mfps:
+            shared = replace(shared, candidacy=_candidacy(points, layout, params, progress))
+        if len(layout) > 1 and method == "refinenet" and params.features.smooth_jet is not None:
+            shared = replace(shared, noise=_noise(points, layout, progress))
+    return shared, layout
+
+
+def tile_normals(points: np.ndarray, tile: Tile, shared: CloudLayout, release: Release, method: str,
+                 initial: np.ndarray | None = None, device: str = "auto", workers: int = 1,
+                 progress: bool = False) -> np.ndarray:
+    """The normals of a tile's own points (`tile.own`) of `points`, the cloud `shared` was made for; `initial`
+    holds the whole cloud's initial normals, if given."""
+    params = release.params
+    sub, rows = points[tile.ids], tile.own_rows
+    if method in ("pca", "jet"):
+        with stage(method):
+            return baseline_normals(sub, method, params.baselines, None)[rows]
+    if initial is not None:
+        start = initial[tile.ids]
+    else:
+        with stage("mfps"):
+            start = mfps_normals(sub, params.mfps, progress, workers, length=shared.length, ids=tile.ids,
+                                 candidacy=shared.candidacy)
+    if method == "mfps":
+        return start[rows]
+    features = compute_features(sub, start, params.features, progress, length=shared.length, centres=rows,
+                                workers=workers, noise=shared.noise)
+    return refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
+                          replace(params.inference, device=device), progress=progress, length=shared.length)
 
 
 #: The estimators the scan figure and table compare Refine-Net with, each with a release's settings.
