@@ -41,6 +41,7 @@ from refinenet.estimators.baselines import pca_normals
 from refinenet.estimators.mfps import mfps_normals
 from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
 from refinenet.geometry.neighbors import knn
+from refinenet.profiling import recording
 
 #: MFPS as params.yaml sets it (its own values, no profile): the paper's synthetic settings.
 MFPS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False).mfps
@@ -97,16 +98,17 @@ def run_case(n: int, repeats: int, threads: int) -> dict:
 
     def once() -> np.ndarray:
         runs.append({})
-        return mfps_normals(points, config, workers=threads, stats=runs[-1])
+        with recording() as steps:
+            normals = mfps_normals(points, config, workers=threads, stats=runs[-1])
+        runs[-1]["steps"] = steps
+        return normals
 
     normals, walls, cpus = best_run(once, repeats)
     peak_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     pca, pca_walls, pca_cpus = best_run(lambda: pca_normals(points, 100), repeats)
     fastest = int(np.argmin(walls))
-    steps = {key.removeprefix("seconds "): value for key, value in runs[fastest].items()
-             if key.startswith("seconds ")}
-    step_cpu = {key.removeprefix("cpu seconds "): value for key, value in runs[fastest].items()
-                if key.startswith("cpu seconds ")}
+    steps = {name: step["wall_s"] for name, step in runs[fastest]["steps"].items()}
+    step_cpu = {name: step["cpu_s"] for name, step in runs[fastest]["steps"].items()}
     near = near_edges(clean, truth)
     errors = {}
     for name, est in (("mfps", normals), ("pca_k100", pca), ("pca_k50", pca_normals(points, 50))):

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from refinenet.config import MFPSConfig
 from refinenet.data.io import check_array
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.neighbors import chunks, covariances, knn, smallest_eigenvectors
+from refinenet.profiling import stage
 from refinenet.threads import thread_map
 
 #: The two methods of the step: MFPS and its "simple MFPS" ablation, both from one set of fitted patches.
@@ -437,7 +437,7 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
 # --------------------------------------------------------------------------------------------------- all
 
 def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
-                 workers: int | None = None, stats: dict[str, float] | None = None,
+                 workers: int | None = None, stats: dict[str, int] | None = None,
                  length: float | None = None, ids: np.ndarray | None = None,
                  candidacy: Candidacy | None = None) -> np.ndarray:
     """Unit, unoriented MFPS normals (N, 3) of a cloud (docs/algorithm.md §2); the arguments are
@@ -446,15 +446,15 @@ def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
 
 
 def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
-                            workers: int | None = None, stats: dict[str, float] | None = None,
+                            workers: int | None = None, stats: dict[str, int] | None = None,
                             length: float | None = None, ids: np.ndarray | None = None,
                             candidacy: Candidacy | None = None) -> dict[str, np.ndarray]:
     """Unit, unoriented normals (N, 3) of a cloud by each of METHODS: MFPS (docs/algorithm.md §2) and its simple-MFPS
     ablation, which differ only in the last step (A.5), so one pass fits the patches for both.
 
     `workers` threads fit the patches (default: the cores this process may use); the result does not
-    depend on it. `progress` shows a bar per step. `stats`, when given, receives the wall and CPU seconds of
-    each step ("seconds <step>", "cpu seconds <step>") and the numbers of candidates and of fitted patches.
+    depend on it. `progress` shows a bar per step, and each step is a `profiling.stage`. `stats`, when given,
+    receives the numbers of candidates and of fitted patches.
     A tile of a larger cloud passes the whole cloud's `length` (l_d, default the bounding-box diagonal),
     its points' `ids` in the whole cloud and the whole cloud's `candidacy`; its points then get the normals
     they get in the whole cloud, wherever their neighbourhoods lie inside the tile.
@@ -466,7 +466,7 @@ def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bo
     stats = {} if stats is None else stats
 
     def step(name: str, total: int = 1) -> AbstractContextManager[tqdm]:
-        return _step(name, total, progress, stats)
+        return _step(name, total, progress)
 
     with step("kNN", len(points)) as bar:
         neighbours = _neighbour_lists(points, max(k_max, k_bw), bar.update)
@@ -507,14 +507,11 @@ def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bo
 
 
 @contextmanager
-def _step(name: str, total: int, progress: bool, stats: dict[str, float]) -> Iterator[tqdm]:
-    """A progress bar for one step (silent when progress is off); records its wall and CPU time in `stats`."""
-    start, cpu = time.perf_counter(), time.process_time()
-    with tqdm(total=total, desc=f"MFPS {name}", disable=not progress) as bar:
+def _step(name: str, total: int, progress: bool) -> Iterator[tqdm]:
+    """One step: a `profiling.stage`, with a progress bar (silent when progress is off)."""
+    with stage(name), tqdm(total=total, desc=f"MFPS {name}", disable=not progress) as bar:
         yield bar
         bar.update(total - bar.n)
-    stats[f"seconds {name}"] = time.perf_counter() - start
-    stats[f"cpu seconds {name}"] = time.process_time() - cpu
 
 
 def _neighbour_lists(points: np.ndarray, k: int, tick: Callable[[int], None]) -> np.ndarray:
