@@ -1,25 +1,26 @@
-"""`refinenet normals` end to end: wall time and peak memory per cloud size, against Open3D's `estimate_normals`
-timed in the same run, and the accuracy of both against the ground truth.
+"""`refinenet normals` end to end and stage by stage: wall and CPU seconds, peak memory and accuracy per cloud size,
+with Open3D, CGAL (jet, VCM) and DISNE timed in the same run, the network's floating-point operations per point and
+the machine's measured GEMM rate beside it.
 
 Each cloud is the procedural fandisk (a CAD shape with sharp edges, a test-split shape the shipped networks never
-saw) sampled at N points with 0.1% Gaussian noise of the bounding-box diagonal, written as binary .ply. Both
-commands run as whole processes under /usr/bin/time -v (start-up, reading and writing included):
+saw) sampled at N points with 0.1% Gaussian noise of the bounding-box diagonal, written as binary .ply. Every
+command runs as a whole process under /usr/bin/time -v (start-up, reading and writing included):
 
-* ours: `refinenet normals cloud.ply -o out.ply --threads T` (defaults: MFPS + Refine-Net, MST orientation,
-  bfloat16 feature convolutions where the CPU has them natively), and again with `--precision float32`;
-* reference: a Python process that reads the cloud with Open3D, calls `estimate_normals()` (its default: PCA of
-  the 30 nearest neighbours, unoriented) and writes the result.
+* ours: `refinenet normals cloud.ply -o out.ply --threads T --timings stages.json` (defaults: MFPS + Refine-Net,
+  MST orientation, `--precision auto`), and again with `--precision float32` where auto picks bfloat16;
+* the peers of `peers.py`, each on its own threads (Open3D on every core, CGAL and DISNE on one).
 
-    python benchmarks/bench_cli.py --points 100000 1000000 [--threads 2]
+    python benchmarks/bench_cli.py --points 100000 1000000 [--threads 2] [--disne DISNE_FOLDER]
 
-Targets (project issue): 100k points in at most 60 s on 2 cores; 1M points in at most 10 minutes and 4 GB; 10M
-points complete within 8 GB. Each --points value is one case in benchmarks/results/cli.json; cli.md is rebuilt
-from all cases.
+Targets (project issue): 100k points in at most 15 s on 2 cores; 10M points in at most 25 minutes with a peak of
+at most 4 GB; per thread at least DISNE's points per second. Each --points value is one case in
+benchmarks/results/cli.json; cli.md is rebuilt from all cases.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import re
 import subprocess
@@ -31,39 +32,52 @@ from pathlib import Path
 import numpy as np
 import torch
 from machine import machine_info
+from peers import peers
+from torch.utils.flop_counter import FlopCounterMode
 
 from refinenet.atomic import write_text
+from refinenet.cli.estimate import estimate_normals
 from refinenet.data.io import read_cloud, write_ply
-from refinenet.data.noise import add_gaussian_noise
+from refinenet.data.noise import add_gaussian_noise, bbox_diagonal
 from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_precision
-from refinenet.network.release import CARD_JSON, SHIPPED
+from refinenet.network.model import INFERENCE_CHUNK
+from refinenet.network.release import CARD_JSON, SHIPPED, load_release
 
 RESULTS = Path(__file__).parent / "results"
 SHAPE, NOISE = "fandisk_a", 0.1
+#: Wall seconds and peak GB per cloud size (None: no target).
+TARGETS = {100_000: (15, None), 10_000_000: (1500, 4.0)}
+#: Points of the cloud the network's operations are counted on.
+FLOP_POINTS = 5000
 
 
 def noisy_cloud(n: int) -> tuple[np.ndarray, np.ndarray]:
     """The benchmark's cloud of n points and its true normals (also cuda_check's)."""
     points, truth = sample_shape(SHAPE, n, seed=11)
     return add_gaussian_noise(points, NOISE, seed=12), truth
-OPEN3D = """
-import sys, open3d as o3d
-pcd = o3d.io.read_point_cloud(sys.argv[1])
-pcd.estimate_normals()
-o3d.io.write_point_cloud(sys.argv[2], pcd)
-"""
-TARGETS = {100_000: (60, None), 1_000_000: (600, 4.0), 10_000_000: (None, 8.0)}
 
 
-def gemm_gflops(threads: int) -> float:
-    """The machine's speed now: the best of 3 float32 matrix products (102400 x 128 by 128 x 1024, the shape of
-    the network's largest layer) on `threads` threads. The CPU is shared, so timings are read against it."""
+def gemm_gflops(threads: int, dtype: torch.dtype = torch.float32) -> float:
+    """The machine's speed now: the best of 10 matrix products in the shape the network's largest layer runs in
+    (`model.INFERENCE_CHUNK` patches of 100 points, 128 by 1024 channels) on `threads` threads. The CPU is shared,
+    so timings are read against it."""
     torch.set_num_threads(threads)
-    a, b = torch.randn(102_400, 128), torch.randn(128, 1024)
-    best = min(_seconds(lambda: a @ b) for _ in range(3))
-    return 2 * 102_400 * 128 * 1024 / best / 1e9
+    rows = INFERENCE_CHUNK * 100
+    a, b = torch.randn(rows, 128, dtype=dtype), torch.randn(128, 1024, dtype=dtype)
+    best = min(_seconds(lambda: a @ b) for _ in range(10))
+    return 2 * rows * 128 * 1024 / best / 1e9
+
+
+def network_flops_per_point() -> float:
+    """Floating-point operations of the shipped networks per refined point (torch's count of every product and
+    convolution), on a small cloud of the benchmark's shape with its strata rule off."""
+    points, _ = noisy_cloud(FLOP_POINTS)
+    release = load_release(SHIPPED)
+    with FlopCounterMode(display=False) as counter:
+        estimate_normals(points, release, n_strata=1, device="cpu")
+    return counter.get_total_flops() / FLOP_POINTS
 
 
 def _seconds(fn) -> float:
@@ -72,12 +86,12 @@ def _seconds(fn) -> float:
     return time.perf_counter() - start
 
 
-def timed(command: list[str]) -> dict[str, float]:
+def timed(command: list[str], env: dict[str, str] | None = None) -> dict[str, float]:
     """Wall seconds, CPU seconds and peak resident memory (GB) of a whole process, from /usr/bin/time -v, and the
     strata `refinenet normals` says it used (1 when it names none)."""
-    run = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True)
+    run = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True, env=env)
     if run.returncode != 0:
-        sys.exit(f"failed: {' '.join(command)}\n{run.stderr[-2000:]}")
+        raise RuntimeError(f"failed: {' '.join(command)[:300]}\n{run.stderr[-2000:]}")
     report = dict(line.strip().split(": ", 1) for line in run.stderr.splitlines() if ": " in line)
     clock = [float(x) for x in re.split("[:]", report["Elapsed (wall clock) time (h:mm:ss or m:ss)"])]
     wall = sum(x * 60 ** i for i, x in enumerate(reversed(clock)))
@@ -87,28 +101,43 @@ def timed(command: list[str]) -> dict[str, float]:
             "strata": int(strata.group(1)) if strata else 1}
 
 
-def case(n: int, threads: int, folder: Path, float32: bool) -> dict:
+def accuracy(normals: np.ndarray, truth: np.ndarray) -> dict[str, float]:
+    angles = unoriented_angles(normals, truth)
+    return {"mean_deg": float(angles.mean()), "rmse_deg": float(np.sqrt((angles ** 2).mean())),
+            "outward": float((np.einsum("ij,ij->i", normals, truth) > 0).mean())}
+
+
+def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, flops: float) -> dict:
     points, truth = noisy_cloud(n)
-    source, ours, reference = folder / "cloud.ply", folder / "ours.ply", folder / "open3d.ply"
+    source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
     write_ply(source, points)
-    ours_float32 = folder / "ours_float32.ply"
-    command = [str(Path(sys.executable).with_name("refinenet")), "normals", str(source), "--threads", str(threads)]
+    np.savetxt(xyz, points, fmt="%.9g")
+    precision = resolve_precision("auto", torch.device("cpu"))
+    dtype = torch.bfloat16 if precision == "bfloat16" else torch.float32
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,
-              "machine": machine_info(gemm_gflops_start=gemm_gflops(threads)),
-              "precision": resolve_precision("auto", torch.device("cpu")),
+              "date": datetime.date.today().isoformat(),
+              "machine": machine_info(gemm_gflops_start=gemm_gflops(threads, dtype)), "precision": precision,
               "networks": json.loads((SHIPPED / CARD_JSON).read_text())["fingerprint"],
-              "ours": timed([*command, "-o", str(ours)]),
-              "ours_float32": timed([*command, "-o", str(ours_float32), "--precision", "float32"]) if float32 else None,
-              "open3d": timed([sys.executable, "-c", OPEN3D, str(source), str(reference)])}
-    for name, path in (("ours", ours), ("ours_float32", ours_float32), ("open3d", reference)):
-        if result[name] is None:
+              "network_flops_per_point": flops}
+    command = [str(Path(sys.executable).with_name("refinenet")), "normals", str(source), "--threads", str(threads)]
+    result["ours"] = timed([*command, "-o", str(folder / "ours.ply"), "--timings", str(folder / "stages.json")])
+    result["ours"].update(accuracy(read_cloud(folder / "ours.ply").normals, truth))
+    result["stages"] = json.loads((folder / "stages.json").read_text())["stages"]
+    if float32 and precision != "float32":
+        result["ours_float32"] = timed([*command, "-o", str(folder / "ours_float32.ply"), "--precision", "float32"])
+        result["ours_float32"].update(accuracy(read_cloud(folder / "ours_float32.ply").normals, truth))
+    runs, result["skipped"] = peers(source, xyz, bbox_diagonal(points), folder, disne)
+    result["peers"] = {}
+    for peer in runs:
+        try:
+            timing = timed(peer.command, peer.env)
+        except RuntimeError as err:
+            result["skipped"][peer.name] = str(err).splitlines()[-1]
             continue
-        normals = read_cloud(path).normals
-        angles = unoriented_angles(normals, truth)
-        result[name].update(mean_deg=float(angles.mean()), rmse_deg=float(np.sqrt((angles ** 2).mean())),
-                            outward=float((np.einsum("ij,ij->i", normals, truth) > 0).mean()))
+        result["peers"][peer.name] = {"what": peer.what, "threads": peer.threads or threads, **timing,
+                                      **accuracy(peer.normals(n), truth)}
     result["load_average_end"] = machine_info()["load_average_1min"]
-    result["gemm_gflops_end"] = gemm_gflops(threads)
+    result["gemm_gflops_end"] = gemm_gflops(threads, dtype)
     return result
 
 
@@ -118,53 +147,131 @@ def _gemm(case: dict) -> str:
     return f"{case['machine']['gemm_gflops_start']:.0f}, {case['gemm_gflops_end']:.0f}"
 
 
-def report(cases: dict[str, dict]) -> str:
+def _per_thread(n: int, timing: dict, threads: int) -> float:
+    return n / timing["wall_s"] / threads
+
+
+def _peers(c: dict) -> dict[str, dict]:
+    """The peers of a case; a case measured before peers.py has Open3D alone."""
+    if "peers" in c:
+        return c["peers"]
+    return {"open3d": {**c["open3d"], "what": "Open3D PCA, k = 30", "threads": c["threads"]}}
+
+
+def _verdicts(c: dict) -> str:
+    o = c["ours"]
+    wall, memory = TARGETS.get(c["points"], (None, None))
+    verdicts = []
+    if wall:
+        verdicts.append(f"wall <= {wall} s: {'met' if o['wall_s'] <= wall else 'NOT met'}")
+    if memory:
+        verdicts.append(f"peak <= {memory} GB: {'met' if o['peak_gb'] <= memory else 'NOT met'}")
+    disne = _peers(c).get("disne")
+    if disne:
+        ours, theirs = _per_thread(c["points"], o, c["threads"]), _per_thread(c["points"], disne, disne["threads"])
+        verdicts.append(f"per thread >= DISNE: {'met' if ours >= theirs else 'NOT met'}")
+    return "; ".join(verdicts) or "none"
+
+
+def summary_row(c: dict) -> str:
+    o, f = c["ours"], c.get("ours_float32")
+    float32 = "not run" if f is None else f"{f['wall_s']:.1f} s, {f['mean_deg']:.3f} / {f['rmse_deg']:.3f}"
+    return (f"| {c['points']:,} | {c.get('date', 'before 2026-12-02')} | {c['machine']['cpu']} | "
+            f"{c.get('precision', 'float32')} | {o.get('strata', 1)} | {o['wall_s']:.1f} | {o['cpu_s']:.1f} | "
+            f"{o['peak_gb']:.2f} | {_per_thread(c['points'], o, c['threads']):,.0f} | "
+            f"{o['mean_deg']:.3f} / {o['rmse_deg']:.3f} | {o['outward']:.4f} | {float32} | {_gemm(c)} | "
+            f"{c['machine']['load_average_1min']:.1f}, {c['load_average_end']:.1f} | "
+            f"{c.get('networks', 'not recorded')} | {_verdicts(c)} |")
+
+
+def stage_table(c: dict) -> list[str]:
+    """Where the time of one case went, stage by stage (a stage's inner stages below it), and the network against
+    the GEMM rate."""
+    wall, stages = c["ours"]["wall_s"], c["stages"]
+    top = [name for name in stages if "/" not in name]
     rows = []
-    for c in sorted(cases.values(), key=lambda c: c["points"]):
-        o, f, r = c["ours"], c.get("ours_float32"), c["open3d"]
-        wall_target, memory_target = TARGETS.get(c["points"], (None, None))
-        verdicts = []
-        if wall_target:
-            verdicts.append(f"wall <= {wall_target} s: {'met' if o['wall_s'] <= wall_target else 'NOT met'}")
-        if memory_target:
-            verdicts.append(f"peak <= {memory_target} GB: {'met' if o['peak_gb'] <= memory_target else 'NOT met'}")
-        float32 = "not run" if f is None else f"{f['wall_s']:.1f} s, {f['mean_deg']:.3f} / {f['rmse_deg']:.3f}"
-        rows.append(f"| {c['points']:,} | {c['machine']['cpu']} | {c.get('precision', 'float32')} | "
-                    f"{o.get('strata', 1)} | {o['wall_s']:.1f} | {o['cpu_s']:.1f} | "
-                    f"{o['peak_gb']:.2f} | {float32} | "
-                    f"{r['wall_s']:.1f} | {r['peak_gb']:.2f} | {o['wall_s'] / r['wall_s']:.1f} | "
-                    f"{o['mean_deg']:.3f} / {o['rmse_deg']:.3f} | {r['mean_deg']:.2f} / {r['rmse_deg']:.2f} | "
-                    f"{o['outward']:.4f} | {c['machine']['load_average_1min']:.1f}, {c['load_average_end']:.1f} | "
-                    f"{_gemm(c)} | {c.get('networks', 'not recorded')} | "
-                    f"{'; '.join(verdicts)} |")
-    machine = next(iter(cases.values()))["machine"]
-    cpus = sorted({c["machine"]["cpu"] for c in cases.values()})
+    for name in top:
+        for key in (name, *(k for k in stages if k.startswith(f"{name}/"))):
+            t, label = stages[key], key.replace("/", " / ")
+            rows.append(f"| {label} | {t['wall_s']:.2f} | {t['cpu_s']:.2f} | {t['calls']} | {t['wall_s'] / wall:.0%} |")
+    rest = wall - sum(stages[name]["wall_s"] for name in top)
+    rows.append(f"| start-up and the rest | {rest:.2f} | | | {rest / wall:.0%} |")
+    network = stages.get("network")
+    lines = [f"### {c['points']:,} points ({c['machine']['cpu']}, {c['date']}, {c['precision']})", "",
+             "| stage | wall (s) | CPU (s) | calls | share of the wall time |", "|---|---|---|---|---|", *rows, ""]
+    if network:
+        gflop = c["points"] * c["network_flops_per_point"] / 1e9
+        rate = max(c["machine"]["gemm_gflops_start"], c["gemm_gflops_end"])
+        lines += [f"The networks: {c['network_flops_per_point'] / 1e6:.1f} MFLOP per point, {gflop:,.0f} GFLOP in "
+                  f"{network['wall_s']:.1f} s, i.e. {gflop / network['wall_s']:.0f} GFLOP/s against the measured "
+                  f"{c['precision']} GEMM rate of {rate:.0f} GFLOP/s: at {gflop / network['wall_s'] / rate:.0%} "
+                  f"of it (at the GEMM rate they would take {gflop / rate:.1f} s).", ""]
+    return lines
+
+
+def peer_rows(c: dict) -> list[str]:
+    ours = _per_thread(c["points"], c["ours"], c["threads"])
+    rows = [f"| {c['points']:,} | Refine-Net (ours) | {c['threads']} | {c['ours']['wall_s']:.1f} | "
+            f"{c['ours']['cpu_s']:.1f} | {c['ours']['peak_gb']:.2f} | {ours:,.0f} | "
+            f"{c['ours']['mean_deg']:.3f} / {c['ours']['rmse_deg']:.3f} | 1.00 |"]
+    for peer in _peers(c).values():
+        theirs = _per_thread(c["points"], peer, peer["threads"])
+        rows.append(f"| {c['points']:,} | {peer['what']} | {peer['threads']} | {peer['wall_s']:.1f} | "
+                    f"{peer['cpu_s']:.1f} | {peer['peak_gb']:.2f} | {theirs:,.0f} | "
+                    f"{peer['mean_deg']:.3f} / {peer['rmse_deg']:.3f} | {ours / theirs:.2f} |")
+    return rows
+
+
+def report(cases: dict[str, dict]) -> str:
+    ordered = sorted(cases.values(), key=lambda c: c["points"])
+    machine = ordered[0]["machine"]
+    cpus = sorted({c["machine"]["cpu"] for c in ordered})
+    skipped = sorted({f"{name}: {why}" for c in ordered for name, why in c.get("skipped", {}).items()})
     return "\n".join([
-        "# `refinenet normals` end to end: time, memory, accuracy",
+        "# `refinenet normals` end to end and by stage: time, memory, accuracy, against its peers",
         "",
         f"Procedural {SHAPE} (a CAD shape with sharp edges, never trained on) with {NOISE}% Gaussian noise, binary "
-        ".ply in and out. *ours*: `refinenet normals cloud.ply -o out.ply` with its defaults (MFPS + the shipped "
-        "Refine-Net networks, MST orientation, `--precision auto`: the *precision* column, bfloat16 point MLP and "
-        "height-map convolutions on a CPU with native bfloat16; `--strata auto`: the *strata* column, interleaved "
-        "subsets each as noisy as the networks know, 1 in runs made before strata existed); *float32*: the same "
-        "with `--precision float32`, the pipeline's precision (wall time, then mean / RMSE); *Open3D*: read, "
-        "`estimate_normals()` (PCA of 30 neighbours, unoriented), write, in the same run. Whole processes under "
-        "`/usr/bin/time -v`. Generated by `benchmarks/bench_cli.py`.",
+        ".ply in and out. *Ours*: `refinenet normals cloud.ply -o out.ply` with its defaults (MFPS + the shipped "
+        "Refine-Net networks, MST orientation, `--precision auto`, `--strata auto`); *float32*: the same with "
+        "`--precision float32` where auto picks bfloat16 (wall time, then mean / RMSE). Every command is a whole "
+        "process under `/usr/bin/time -v`, start-up, reading and writing included, and the peers ran in the same "
+        "run as ours. Generated by `benchmarks/bench_cli.py`.",
         "",
         f"Machines: {' and '.join(cpus)} (a row's *CPU*), {machine['cores']} cores, {machine['memory_gb']} GB, "
-        f"Python {machine['python']}; each row was measured on one machine, Open3D in the same run.",
+        f"Python {machine['python']}. A row measured before the stage timings existed has no stages or peers "
+        "but Open3D; it ran the code and networks of its date.",
         "",
-        "| points | CPU | precision | strata | ours wall (s) | ours CPU (s) | ours peak (GB) "
-        "| float32 wall, mean / RMSE (deg) | Open3D wall (s) | Open3D peak (GB) | wall ratio | ours mean / RMSE (deg) "
-        "| Open3D mean / RMSE (deg) | ours outward | load start, end | GEMM GFLOP/s start, end | networks | targets |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-        *rows,
+        "## Summary",
+        "",
+        "| points | measured | CPU | precision | strata | wall (s) | CPU (s) | peak (GB) | points/s per thread "
+        "| mean / RMSE (deg) | outward | float32 wall, mean / RMSE (deg) | GEMM GFLOP/s start, end | load start, end "
+        "| networks | targets |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        *map(summary_row, ordered),
         "",
         "Errors are unoriented angles to the true normals; *outward* is the fraction of our oriented normals on the "
-        "outer side (Open3D's are unoriented). A load average above 2 at the start means another job shared the "
-        "cores. *Networks* names the shipped release that ran (its model card's fingerprint). The GEMM "
-        "column is the machine's speed at the time (`gemm_gflops`); the same machine has measured "
-        "from about 60 to about 200 GFLOP/s on different days, and the network's time follows it.",
+        "outer side. *Points/s per thread*: points over wall seconds over the threads given. The GEMM column is the "
+        "machine's speed at the time, in the precision that ran (`gemm_gflops`); the same machine has measured from "
+        "about 60 to about 200 GFLOP/s in float32 on different days, and the network's time follows it. A load "
+        "average above 2 at the start means another job shared the cores. *Networks* names the shipped release "
+        "that ran (its model card's fingerprint).",
+        "",
+        "## Where the time goes",
+        "",
+        "From `refinenet normals --timings`: each stage's wall and CPU seconds summed over its calls (per stratum, "
+        "per tile, per batch). *Start-up and the rest* is the process's wall time outside the stages: the "
+        "interpreter, the imports and the bookkeeping between stages.",
+        "",
+        *[line for c in ordered if "stages" in c for line in stage_table(c)],
+        "## The peers, in the same run",
+        "",
+        "| points | method | threads | wall (s) | CPU (s) | peak (GB) | points/s per thread | mean / RMSE (deg) "
+        "| ours per thread / theirs |",
+        "|---|---|---|---|---|---|---|---|---|",
+        *[row for c in ordered for row in peer_rows(c)],
+        "",
+        "The peers' normals are unoriented, ours oriented (MST) within the same wall time."
+        + (f" Not run: {'; '.join(skipped)}." if skipped else ""),
         "",
     ])
 
@@ -175,12 +282,14 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--no-float32", dest="float32", action="store_false",
                         help="skip the second run with --precision float32 (it doubles the time)")
+    parser.add_argument("--disne", type=Path, help="a DISNE folder made by ../shared/peers/disne/prepare.sh")
     args = parser.parse_args()
+    flops = network_flops_per_point()
     path = RESULTS / "cli.json"
     cases = json.loads(path.read_text()) if path.exists() else {}
     for n in args.points:
         with tempfile.TemporaryDirectory() as folder:
-            cases[str(n)] = case(n, args.threads, Path(folder), args.float32)
+            cases[str(n)] = case(n, args.threads, Path(folder), args.float32, args.disne, flops)
         print(json.dumps(cases[str(n)], indent=1))
         write_text(path, json.dumps(cases, indent=1) + "\n")
         write_text(RESULTS / "cli.md", report(cases))
