@@ -65,20 +65,6 @@ def test_the_tiles_as_snakemake_jobs_give_the_normals_of_one_process(cloud, tmp_
     assert sorted(p.name for p in work.iterdir()) == [".snakemake", "tiled.ply"]
 
 
-def test_the_jobs_of_a_plan_give_the_normals_of_one_process(cloud, tmp_path, capsys):
-    plan = tmp_path / "plan.json"
-    assert tiles(capsys, "plan", cloud, "-o", plan, "--method", "pca", "--tile-points", TILE_POINTS)[0] == 0
-    n_jobs = sum(json.loads(plan.read_text())["n_tiles"])
-    assert n_jobs == N_POINTS // TILE_POINTS
-    pieces = [tmp_path / f"{job}.npz" for job in range(n_jobs)]
-    for job, piece in enumerate(pieces):
-        assert tiles(capsys, "run", plan, "--job", job, "-o", piece, "--threads", 1)[0] == 0
-    assert tiles(capsys, "merge", plan, *pieces, "-o", tmp_path / "tiled.npy", "--orient", "none")[0] == 0
-    assert main(["normals", str(cloud), "-o", str(tmp_path / "whole.npy"), "--method", "pca", "--orient", "none",
-                 "--tile-points", str(TILE_POINTS)]) == 0
-    np.testing.assert_array_equal(np.load(tmp_path / "tiled.npy"), np.load(tmp_path / "whole.npy"))
-
-
 @pytest.fixture
 def jobs(cloud, tmp_path, capsys) -> tuple[Path, list[Path]]:
     """A PCA plan of the strip and its pieces."""
@@ -88,6 +74,15 @@ def jobs(cloud, tmp_path, capsys) -> tuple[Path, list[Path]]:
     for job, piece in enumerate(pieces):
         assert tiles(capsys, "run", plan, "--job", job, "-o", piece, "--threads", 1)[0] == 0
     return plan, pieces
+
+
+def test_the_jobs_of_a_plan_give_the_normals_of_one_process(jobs, cloud, tmp_path, capsys):
+    plan, pieces = jobs
+    assert sum(json.loads(plan.read_text())["n_tiles"]) == len(pieces)
+    assert tiles(capsys, "merge", plan, *pieces, "-o", tmp_path / "tiled.npy", "--orient", "none")[0] == 0
+    assert main(["normals", str(cloud), "-o", str(tmp_path / "whole.npy"), "--method", "pca", "--orient", "none",
+                 "--tile-points", str(TILE_POINTS)]) == 0
+    np.testing.assert_array_equal(np.load(tmp_path / "tiled.npy"), np.load(tmp_path / "whole.npy"))
 
 
 def test_merge_refuses_missing_repeated_and_foreign_pieces(jobs, tmp_path, capsys):
