@@ -180,7 +180,7 @@ def test_command_refines_a_noisy_cad_shape_and_orients_it_outwards(tmp_path):
     assert unoriented_angles(normals, outward).mean() < unoriented_angles(pca_normals(points, 100), outward).mean()
     timings = json.loads((tmp_path / "stages.json").read_text())
     stages = {name: s for name, s in timings["stages"].items() if "/" not in name}
-    assert list(stages) == ["release", "read", "strata rule", "layout", "mfps", "smooth jet", "filtered normals",
+    assert list(stages) == ["read", "release", "strata rule", "layout", "mfps", "smooth jet", "filtered normals",
                             "height maps", "patches", "network", "orientation", "write"]
     assert timings["points"] == 10_000 and timings["strata"] == 1
     assert stages["network"]["calls"] == stages["patches"]["calls"] - 1 >= 10  # a batch of 1024 per call at most

@@ -1,3 +1,8 @@
 """Refine-Net: normal refinement for noisy point clouds (Zhou et al., TPAMI 2022), as a reproducible pipeline."""
 
+from pathlib import Path
+
 __version__ = "0.5.0"
+#: Where the package keeps its shipped release (the pipeline's `release` step writes it). Here, not in
+#: `network.release`, so that a command checks its files against it before importing torch.
+SHIPPED = Path(__file__).resolve().parent / "shipped"

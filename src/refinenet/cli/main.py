@@ -236,15 +236,13 @@ def info(args: argparse.Namespace) -> int:
 
 
 def normals(args: argparse.Namespace) -> int:
-    import torch
-
+    """`refinenet normals`. Everything that needs no network is checked first, the cloud read included, so that a
+    bad input is refused in a fraction of a second, before torch and the estimators are imported."""
     from refinenet.atomic import atomic_group, write_text
-    from refinenet.cli.estimate import TILE_POINTS, estimate_normals, min_points
-    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, output_files, read_cloud, write_points
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_array, check_file, output_files, read_cloud, write_points
     from refinenet.profiling import recording, stage
 
     start = time.perf_counter()
-    torch.set_num_threads(args.threads)
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
     output = Path(args.output)
     timings = Path(args.timings) if args.timings else None
@@ -253,14 +251,20 @@ def normals(args: argparse.Namespace) -> int:
     _check_outputs(args.input, args.release, output_files(output) + ([timings] if timings else []), args.force,
                    {"the --initial file": args.initial})
     _check_estimate_options(args)
-    device, precision = _device(args)
     with recording() as stages:
+        with stage("read"):
+            cloud = read_cloud(args.input)
+            initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
+        import torch
+
+        from refinenet.cli.estimate import TILE_POINTS, estimate_normals, min_points
+
+        torch.set_num_threads(args.threads)
+        device, precision = _device(args)
         with stage("release"):
             release = _release(args.release, device, with_networks=args.method == "refinenet", precision=precision)
         needed = min_points(release.params, args.method, args.initial is not None)
-        with stage("read"):
-            cloud = read_cloud(args.input, min_points=needed)
-            initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
+        check_array(args.input, cloud.points, "points", needed)
         n_strata = _n_strata(args, cloud.points, release, needed)
         result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
                                   args.tile_points or TILE_POINTS, args.threads, sys.stderr.isatty(), n_strata)
@@ -283,9 +287,7 @@ def normals(args: argparse.Namespace) -> int:
 def plan(args: argparse.Namespace) -> int:
     """`refinenet tiles plan`: the whole-cloud measurements of `normals`, stopped before the first tile."""
     from refinenet.atomic import atomic_group, write_text
-    from refinenet.cli.estimate import TILE_POINTS, min_points
-    from refinenet.cli.jobs import make_plan
-    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, read_cloud
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_array, check_file, read_cloud
 
     start = time.perf_counter()
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
@@ -293,11 +295,15 @@ def plan(args: argparse.Namespace) -> int:
     _check_suffix(output, ".json", "the plan is JSON")
     _check_outputs(args.input, args.release, [output], args.force, {"the --initial file": args.initial})
     _check_estimate_options(args)
-    release = _release(args.release, with_networks=False)
-    needed = min_points(release.params, args.method, args.initial is not None)
-    cloud = read_cloud(args.input, min_points=needed)
+    cloud = read_cloud(args.input)
     if args.initial:
         _given_normals(args.initial, args.input, len(cloud))  # refused here, not in every job
+    from refinenet.cli.estimate import TILE_POINTS, min_points
+    from refinenet.cli.jobs import make_plan
+
+    release = _release(args.release, with_networks=False)
+    needed = min_points(release.params, args.method, args.initial is not None)
+    check_array(args.input, cloud.points, "points", needed)
     n_strata = _n_strata(args, cloud.points, release, needed)
     absolute = {name: os.path.abspath(path) if path else None
                 for name, path in (("cloud", args.input), ("release", args.release), ("initial", args.initial))}
@@ -447,8 +453,8 @@ def _check_outputs(cloud: str, release: str | None, writes: list[Path], force: b
                    reads: dict[str, str | list[str] | None] | None = None) -> None:
     """`files.check_outputs` for a command's cloud, its release and the other files `reads` names by what they are
     (e.g. "the --initial file")."""
+    from refinenet import SHIPPED
     from refinenet.cli.files import check_outputs, release_files
-    from refinenet.network.release import SHIPPED
 
     named = {"the input": [cloud], "a file of the release": release_files(release or SHIPPED)}
     named |= {what: [path] if isinstance(path, str) else path for what, path in (reads or {}).items() if path}

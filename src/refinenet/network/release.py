@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from refinenet import SHIPPED
 from refinenet.atomic import write_text, write_torch
 from refinenet.config import InferenceConfig, Params, PatchConfig
 from refinenet.errors import InputError, first_line
@@ -28,8 +29,6 @@ from refinenet.network.inference import load_networks, refine_normals
 from refinenet.network.model import NetworkConfig, RefineNet, architecture, count_parameters, for_inference
 from refinenet.network.training import network_fingerprint
 
-#: Where the package keeps its shipped release (the pipeline's `release` step writes it).
-SHIPPED = Path(__file__).resolve().parents[1] / "shipped"
 BUNDLE, CARD_JSON, CARD_MD = "networks.pt", "model_card.json", "MODEL_CARD.md"
 #: Format of the bundle (its `format`): from 2, the params hold every setting. A loader upgrades an older format
 #: (`_upgrade`) and refuses a newer one rather than misreading it.
