@@ -112,8 +112,7 @@ def parser() -> argparse.ArgumentParser:
     plan.add_argument("input", help="the point cloud")
     plan.add_argument("-o", "--output", required=True, metavar="PLAN.json", help="the plan to write")
     _estimate_options(plan)
-    plan.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)), help="CPU threads (default: "
-                                                                                        "every core)")
+    _threads_option(plan)
     run = steps.add_parser("run", help="the normals of one tile's own points")
     run.add_argument("plan", help="the plan of `refinenet tiles plan`")
     run.add_argument("--job", type=int, required=True, help="which job: 0 to the plan's n_jobs - 1")
@@ -124,8 +123,7 @@ def parser() -> argparse.ArgumentParser:
     merge.add_argument("pieces", nargs="+", metavar="PIECE.npz", help="the pieces of all jobs")
     merge.add_argument("-o", "--output", required=True, help="the file to write (format from its extension)")
     _orientation_options(merge)
-    merge.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)), help="CPU threads (default: "
-                                                                                         "every core)")
+    _threads_option(merge)
     for step in (plan, run, merge):
         step.add_argument("--force", action="store_true", help="replace existing output files (never an input)")
     denoise = commands.add_parser("denoise", help="denoise a point cloud along its normals (docs/algorithm.md §11)",
@@ -185,6 +183,10 @@ def _network_options(command: argparse.ArgumentParser) -> None:
                          help="of the networks' point MLP and height-map convolutions (auto: bfloat16 on a CPU that "
                               "computes it natively: about 1.5x faster, the mean error within 0.01 deg; else "
                               "float32, the pipeline's)")
+    _threads_option(command)
+
+
+def _threads_option(command: argparse.ArgumentParser) -> None:
     command.add_argument("--threads", type=int, default=len(os.sched_getaffinity(0)),
                          help="CPU threads (default: every core this process may use)")
 
