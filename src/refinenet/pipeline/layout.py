@@ -19,7 +19,7 @@ HISTORY_DIR = "results/history/{variant}"
 HISTORY = f"{HISTORY_DIR}/cluster_{{cluster}}.csv"
 #: Resumable training state, outside every step's outputs so that neither tool clears it before a rerun.
 CHECKPOINT_DIR = "results/checkpoints/{variant}"
-#: The shipped release (`network.release`): committed with the package, so it is not DVC-cached.
+#: The shipped release (`refinenet.SHIPPED`): committed with the package, so it is not DVC-cached.
 RELEASE = "src/refinenet/shipped"
 #: Each per-cloud job's log and Snakemake benchmark file (wall seconds, peak memory), by step: a method
 #: (`mfps`) or a per-variant family and its variant (`features/full`).
