@@ -4,7 +4,7 @@ those of its simple-MFPS ablation, which one pass over the fitted patches gives 
 from dataclasses import replace
 
 from refinenet.data.clouds import cloud_key
-from refinenet.data.io import check_array, read_cloud, write_normals
+from refinenet.data.io import check_count, read_cloud, write_normals
 from refinenet.data.noise import derive_seed
 from refinenet.estimators.mfps import mfps_and_simple_normals
 from refinenet.pipeline import stage
@@ -19,7 +19,7 @@ def arguments(parser):
 def main(params, args):
     cloud = read_cloud(args.cloud)
     config = replace(params.mfps, seed=derive_seed(params.seed, "mfps", cloud_key(args.cloud, cloud)))
-    check_array(args.cloud, cloud.points, "points", max(config.scales[-1], config.k_bw))
+    check_count(args.cloud, len(cloud), max(config.scales[-1], config.k_bw))
     normals = mfps_and_simple_normals(cloud.points, config, progress=True, workers=args.threads)
     write_normals(args.out, normals["mfps"])
     if args.simple_out:

@@ -241,7 +241,7 @@ def normals(args: argparse.Namespace) -> int:
     """`refinenet normals`. Everything that needs no network is checked first, the cloud read included, so that a
     bad input is refused in a fraction of a second, before torch and the estimators are imported."""
     from refinenet.atomic import atomic_group, write_text
-    from refinenet.data.io import POINT_FILE_SUFFIXES, check_array, check_file, output_files, read_cloud, write_points
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, output_files, read_cloud, write_points
     from refinenet.profiling import recording, stage
 
     start = time.perf_counter()
@@ -259,14 +259,13 @@ def normals(args: argparse.Namespace) -> int:
             initial = _given_normals(args.initial, args.input, len(cloud)) if args.initial else None
         import torch
 
-        from refinenet.cli.estimate import TILE_POINTS, estimate_normals, min_points
+        from refinenet.cli.estimate import TILE_POINTS, estimate_normals
 
         torch.set_num_threads(args.threads)
         device, precision = _device(args)
         with stage("release"):
             release = _release(args.release, device, with_networks=args.method == "refinenet", precision=precision)
-        needed = min_points(release.params, args.method, args.initial is not None)
-        check_array(args.input, cloud.points, "points", needed)
+        needed = _needed(args, len(cloud), release)
         n_strata = _n_strata(args, cloud.points, release, needed)
         result = estimate_normals(cloud.points, release, args.method, initial, args.scale, device,
                                   args.tile_points or TILE_POINTS, args.threads, sys.stderr.isatty(), n_strata)
@@ -289,7 +288,7 @@ def normals(args: argparse.Namespace) -> int:
 def plan(args: argparse.Namespace) -> int:
     """`refinenet tiles plan`: the whole-cloud measurements of `normals`, stopped before the first tile."""
     from refinenet.atomic import atomic_group, write_text
-    from refinenet.data.io import POINT_FILE_SUFFIXES, check_array, check_file, read_cloud
+    from refinenet.data.io import POINT_FILE_SUFFIXES, check_file, read_cloud
 
     start = time.perf_counter()
     check_file(args.input, POINT_FILE_SUFFIXES, "point file")
@@ -300,12 +299,11 @@ def plan(args: argparse.Namespace) -> int:
     cloud = read_cloud(args.input)
     if args.initial:
         _given_normals(args.initial, args.input, len(cloud))  # refused here, not in every job
-    from refinenet.cli.estimate import TILE_POINTS, min_points
+    from refinenet.cli.estimate import TILE_POINTS
     from refinenet.cli.jobs import make_plan
 
     release = _release(args.release, with_networks=False)
-    needed = min_points(release.params, args.method, args.initial is not None)
-    check_array(args.input, cloud.points, "points", needed)
+    needed = _needed(args, len(cloud), release)
     n_strata = _n_strata(args, cloud.points, release, needed)
     absolute = {name: os.path.abspath(path) if path else None
                 for name, path in (("cloud", args.input), ("release", args.release), ("initial", args.initial))}
@@ -419,6 +417,17 @@ def _device(args: argparse.Namespace) -> tuple[str, str]:
     except ValueError as err:
         raise InputError("--device", str(err)) from None
     return str(device), resolve_precision(args.precision, device)
+
+
+def _needed(args: argparse.Namespace, n_points: int, release) -> int:
+    """The points the method needs (its largest neighbourhood), refused if the cloud, read before the release that
+    sets them, has fewer."""
+    from refinenet.cli.estimate import min_points
+    from refinenet.data.io import check_count
+
+    needed = min_points(release.params, args.method, args.initial is not None)
+    check_count(args.input, n_points, needed)
+    return needed
 
 
 def _n_strata(args: argparse.Namespace, points, release, needed: int) -> int:

@@ -78,9 +78,14 @@ def check_array(path: str | Path, array: np.ndarray, what: str, min_points: int 
     bad = ~np.isfinite(array).all(axis=1)
     if bad.any():
         raise InputError(path, f"{what} contain NaN or inf (first at row {int(np.argmax(bad)) + 1})")
-    if len(array) < min_points:
-        raise InputError(path, f"{len(array)} points, fewer than the {min_points} this step needs")
+    check_count(path, len(array), min_points)
     return array
+
+
+def check_count(path: str | Path, n_points: int, min_points: int) -> None:
+    """Refuse fewer than `min_points` points: alone, for a cloud read before its step knew how many it needs."""
+    if n_points < min_points:
+        raise InputError(path, f"{n_points} points, fewer than the {min_points} this step needs")
 
 
 def check_extent(path: str | Path, coordinates: np.ndarray, what: str) -> None:
