@@ -38,6 +38,15 @@ def test_mst_orients_sharp_normals_outwards(shape):
     assert outward_fraction(orient_mst(points, scrambled(outward, 3)), outward) >= 0.99
 
 
+@pytest.mark.parametrize("shape", ["fandisk_a", "ellipsoid_a"])
+def test_mst_orients_dense_noisy_clouds_outwards(shape):
+    """100k points with 0.5% noise: the PCA field on the graph's own 12 neighbours is too noisy to walk on (these
+    came out 84% and 92% outward on it, 99.3% and 99.5% on GUIDE_K = 30)."""
+    points, outward = sample_shape(shape, 100_000, seed=1)
+    points = add_gaussian_noise(points, 0.5, seed=2)
+    assert outward_fraction(orient_mst(points, scrambled(outward, 3)), outward) >= 0.99
+
+
 def test_torus_truth_is_outward():
     """The shapes' normals used as truth above point outwards (checked analytically on the torus)."""
     points, normals = sample_shape("torus_a", 5000, seed=1)
