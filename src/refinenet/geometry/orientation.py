@@ -11,6 +11,8 @@ unoriented angle), while users reconstructing surfaces need them to point outwar
   walked on directly, 99.7% this way). The PCA takes more neighbours (GUIDE_K) than the graph links: on the graph's
   own 12 the field is as noisy as the cloud is dense, and a 1M-point fandisk with 0.1% noise came out 98.0%
   outward from its exact normals, 0.5% noise 49%; with 30, 99.97% and 90% (studies/results/orientation.md).
+  Across a wedge sharper than a right angle (a cone's rim) the PCA field turns the wrong way whatever its size,
+  and the face beyond can come out flipped.
 * `orient_viewpoint`: every normal towards a sensor position, for scans with a known origin.
 """
 
