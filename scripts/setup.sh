@@ -16,7 +16,7 @@ if ! ldconfig -p 2>/dev/null | grep "libusb-1.0.so.0" >/dev/null; then
     DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libusb-1.0-0 >/dev/null
 fi
 
-SUPPORTED="3.11 3.12 3.13"  # pyproject.toml's requires-python (CI runs 3.11; .ci/run says how to test 3.13)
+SUPPORTED="3.11 3.12 3.13"  # pyproject.toml's requires-python (CI tests 3.11 and 3.13: .ci/run)
 version() { "$1" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null; }
 supported() { [[ " $SUPPORTED " == *" $1 "* ]]; }
 
