@@ -1,11 +1,9 @@
-"""Which field and which sign test should `orient_mst` walk with? The exact normals of every procedural shape,
-their signs scrambled, oriented by `orient_mst` with the walk on PCA normals of 12 (the graph's own neighbours),
-30 or 50 neighbours, under the plain sign test (n_i . n_j) or the reflected one (n_j reflected across the plane
-bisecting the chord, for chords longer than 1 or 2 times the noise), on clean and noisy clouds of 10k and 100k
-points, and on fandisk at 1M points.
+"""How many neighbours should the PCA field take that `orient_mst` walks on? The exact normals of every procedural
+shape, their signs scrambled, oriented by `orient_mst` with the walk on PCA normals of 12 (the graph's own
+neighbours), 30 or 50 neighbours, on clean and noisy clouds of 10k and 100k points, and on fandisk at 1M points.
 
-Backs `refinenet.geometry.orientation.GUIDE_K` and `MIN_CHORD`. The score is the fraction of points whose oriented
-normal is on the outer side of the surface (the shapes' normals point outwards).
+Backs `refinenet.geometry.orientation.GUIDE_K`. The score is the fraction of points whose oriented normal is on
+the outer side of the surface (the shapes' normals point outwards).
 
     python studies/orientation.py [--points 10000 100000] [--large 1000000]
 
@@ -15,7 +13,6 @@ Writes studies/results/orientation.json and orientation.md.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -32,18 +29,15 @@ from refinenet.data.shapes import catalogue, sample_shape  # noqa: E402
 from refinenet.geometry import orientation  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
-#: (name, GUIDE_K, MIN_CHORD): an infinite MIN_CHORD is the plain test everywhere.
-VARIANTS = (("12 plain", 12, math.inf), ("30 plain", 30, math.inf), ("50 plain", 50, math.inf),
-            ("30 reflected > 1", 30, 1.0), ("30 reflected > 2", 30, 2.0))
+GUIDES = (12, 30, 50)
 NOISES = (0.0, 0.1, 0.5)  # percent of the bounding-box diagonal
 LARGE_SHAPE = "fandisk_a"
 
 
-def outward(points: np.ndarray, truth: np.ndarray, guide_k: int, min_chord: float) -> tuple[float, float]:
-    """Outward fraction and seconds of `orient_mst` with the walk on `guide_k` neighbours' PCA normals and the
-    reflected test on chords longer than `min_chord` times the noise."""
+def outward(points: np.ndarray, truth: np.ndarray, guide_k: int) -> tuple[float, float]:
+    """Outward fraction and seconds of `orient_mst` with the walk on `guide_k` neighbours' PCA normals."""
     signs = np.where(np.random.default_rng(0).random(len(truth)) < 0.5, -1.0, 1.0)[:, None]
-    orientation.GUIDE_K, orientation.MIN_CHORD = guide_k, min_chord
+    orientation.GUIDE_K = guide_k
     start = time.perf_counter()
     oriented = orientation.orient_mst(points, truth * signs)
     return float((np.einsum("ij,ij->i", oriented, truth) > 0).mean()), time.perf_counter() - start
@@ -56,40 +50,38 @@ def cases(shapes: list[str], sizes: list[int]) -> list[dict]:
             clean, truth = sample_shape(shape, n, seed=11)
             for noise in NOISES:
                 points = add_gaussian_noise(clean, noise, seed=12) if noise else clean
-                for name, guide_k, min_chord in VARIANTS:
-                    fraction, seconds = outward(points, truth, guide_k, min_chord)
-                    rows.append({"points": n, "shape": shape, "noise": noise, "variant": name,
+                for guide_k in GUIDES:
+                    fraction, seconds = outward(points, truth, guide_k)
+                    rows.append({"points": n, "shape": shape, "noise": noise, "guide_k": guide_k,
                                  "outward": fraction, "seconds": seconds})
-            print(f"{n} {shape}: {[round(r['outward'], 4) for r in rows[-len(NOISES) * len(VARIANTS):]]}", flush=True)
+            print(f"{n} {shape}: {[round(r['outward'], 4) for r in rows[-len(NOISES) * len(GUIDES):]]}", flush=True)
     return rows
 
 
 def summary(rows: pd.DataFrame) -> pd.DataFrame:
-    group = rows.groupby(["points", "noise", "variant"]).outward
+    group = rows.groupby(["points", "noise", "guide_k"]).outward
     return pd.DataFrame({"clouds": group.size(), "mean": group.mean(), "worst": group.min(),
                          "below99": group.apply(lambda x: int((x < 0.99).sum())),
                          "below90": group.apply(lambda x: int((x < 0.9).sum())),
-                         "seconds": rows.groupby(["points", "noise", "variant"]).seconds.mean()}).reset_index()
+                         "seconds": rows.groupby(["points", "noise", "guide_k"]).seconds.mean()}).reset_index()
 
 
 def markdown(record: dict, table: pd.DataFrame, failing: pd.DataFrame) -> str:
-    lines = ["# The field and the sign test of the MST orientation", "",
-             "`orient_mst` on the exact (outward) normals of the procedural shapes with scrambled signs. *Variant*: "
-             "the neighbours of the PCA field the walk runs on (the graph links 12), and the sign test: *plain* "
-             "n_i . n_j, or *reflected* (n_j reflected across the plane bisecting the chord between the two "
-             "neighbourhoods' centroids) on chords longer than 1 or 2 times the noise. *Outward*: the fraction of "
-             "points oriented to the outer side. Noise in percent of the bounding-box diagonal. Generated by "
+    lines = ["# How many neighbours for the PCA field the orientation walks on", "",
+             "`orient_mst` on the exact (outward) normals of the procedural shapes with scrambled signs; the walk on "
+             "the PCA normals of *guide k* neighbours (the graph links 12). *Outward*: the fraction of points "
+             "oriented to the outer side. Noise in percent of the bounding-box diagonal. Generated by "
              "`studies/orientation.py`.", "",
-             "| points | noise (%) | variant | clouds | mean outward | worst | below 99% | below 90% | seconds |",
+             "| points | noise (%) | guide k | clouds | mean outward | worst | below 99% | below 90% | seconds |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in table.itertuples(index=False):
-        lines.append(f"| {r.points:,} | {r.noise:g} | {r.variant} | {r.clouds} | {r.mean:.4f} | {r.worst:.4f} | "
+        lines.append(f"| {r.points:,} | {r.noise:g} | {r.guide_k} | {r.clouds} | {r.mean:.4f} | {r.worst:.4f} | "
                      f"{r.below99} | {r.below90} | {r.seconds:.2f} |")
-    names = [name for name, _, _ in VARIANTS]
-    lines += ["", "Clouds below 99% outward with some variant (the rest are at or above it with all):", "",
-              "| points | shape | noise (%) | " + " | ".join(names) + " |", "|---|---|---|" + "---|" * len(names)]
+    lines += ["", "Clouds below 99% outward with any guide k (the rest are at or above it with all three):", "",
+              "| points | shape | noise (%) | " + " | ".join(f"guide k = {g}" for g in GUIDES) + " |",
+              "|---|---|---|" + "---|" * len(GUIDES)]
     for (n, shape, noise), r in failing.iterrows():
-        lines.append(f"| {n:,} | {shape} | {noise:g} | " + " | ".join(f"{r[name]:.4f}" for name in names) + " |")
+        lines.append(f"| {n:,} | {shape} | {noise:g} | " + " | ".join(f"{r[g]:.4f}" for g in GUIDES) + " |")
     lines += ["", f"Wall time {record['wall_s']:.0f} s on {record['machine']['cpu']}, "
               f"{record['machine']['cores']} cores, Python {record['machine']['python']}.", ""]
     return "\n".join(lines)
@@ -105,9 +97,9 @@ def main() -> None:
     rows = cases(sorted(catalogue()), args.points) + cases([LARGE_SHAPE], args.large)
     frame = pd.DataFrame(rows)
     table = summary(frame)
-    wide = frame.pivot_table(index=["points", "shape", "noise"], columns="variant", values="outward")
+    wide = frame.pivot_table(index=["points", "shape", "noise"], columns="guide_k", values="outward")
     failing = wide[(wide < 0.99).any(axis=1)]
-    record = {"variants": [list(v) for v in VARIANTS], "noises": list(NOISES), "rows": rows,
+    record = {"guides": list(GUIDES), "noises": list(NOISES), "rows": rows,
               "wall_s": time.perf_counter() - start, "machine": machine_info()}
     write_results(args.out, "orientation", record, markdown(record, table, failing))
 
