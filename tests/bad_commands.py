@@ -1,5 +1,5 @@
-"""A corpus of hostile command lines for `refinenet normals` and `refinenet denoise`, generated on the fly (no
-binaries are kept): the sibling of `bad_inputs.py`, whose cases are bad input files, for bad commands.
+"""A corpus of hostile command lines for `refinenet normals`, `refinenet denoise` and `refinenet tiles`, generated
+on the fly (no binaries are kept): the sibling of `bad_inputs.py`, whose cases are bad input files, for bad commands.
 
 Each `CommandCase` is a small record: the files it writes into a folder (its inputs, and any existing file in the
 way of an output), the arguments, and the outcome the contract promises a user, who must never lose a file:
@@ -22,6 +22,8 @@ import io
 import os
 import resource
 import signal
+import subprocess
+import sys
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -33,8 +35,8 @@ from bad_inputs import _directory, _ply_builder, _rows, _six, _unreadable, _xyz,
 
 from refinenet.network.release import BUNDLE, CARD_JSON, CARD_MD, SHIPPED
 
-NORMALS, DENOISE = "normals", "denoise"
-ENTRIES = (NORMALS, DENOISE)
+NORMALS, DENOISE, TILES = "normals", "denoise", "tiles"
+ENTRIES = (NORMALS, DENOISE, TILES)
 OK, BAD = 0, 2
 #: Exit statuses of a command stopped by SIGINT or SIGTERM: 128 + the signal, as a shell reports it.
 INTERRUPTED = {signal.SIGINT: 128 + signal.SIGINT, signal.SIGTERM: 128 + signal.SIGTERM}
@@ -43,7 +45,7 @@ INPUT = "input"
 CLASSES = {
     "same-file": "an output is a file the command reads: the same path, a hard link, a symbolic link, or the "
                  ".normals beside an .xyz output; refused even with --force",
-    "twice": "two outputs are the same file",
+    "twice": "two outputs are the same file, or one tiles piece named twice",
     "exists": "an output exists: refused without --force, replaced with it",
     "partial": "one of several outputs cannot be written: none is",
     "folder": "a folder (or a pipe) where a file is read or written",
@@ -55,6 +57,7 @@ CLASSES = {
     "naming": "output names in upper case, and a format that cannot hold the result",
     "side-file": "a file beside the input that the user did not name is not read",
     "ply": "PLY inputs: placeholder normals, a vertex count the data does not hold",
+    "stale": "a tiles job or merge whose cloud changed since its plan was made",
 }
 #: Points of the ordinary clouds (on the unit sphere), of the full-disk ones, and of the clouds large enough that a
 #: command is surely still working seconds after it has opened them (Refine-Net: minutes; denoise: 15 s and more).
@@ -72,7 +75,7 @@ class CommandCase:
     name: str
     """`CLASS/what`: unique; CLASS is a key of CLASSES."""
     entry: str
-    """normals | denoise: the subcommand."""
+    """normals | denoise | tiles: the subcommand."""
     build: Callable[[Path], None]
     """Writes the case's files into a folder: its inputs, and any existing file in the way of an output."""
     argv: str
@@ -435,10 +438,55 @@ def _ply() -> list[CommandCase]:
     ]
 
 
+def tiles_work(stale: bool = False, earlier: tuple[str, ...] = ()) -> Callable[[Path], None]:
+    """The cloud in.xyz, its tiles plan plan.json and its one job's piece 0.npz, made by the command itself (PCA,
+    so in seconds); `stale`: the cloud then replaced by another; each name in `earlier` then holds EARLIER."""
+    def build(folder: Path) -> None:
+        write_content(folder / "in.xyz", CLOUD)
+        for step in (["plan", "in.xyz", "-o", "plan.json", "--method", "pca"],
+                     ["run", "plan.json", "--job", "0", "-o", "0.npz"]):
+            subprocess.run([sys.executable, "-m", "refinenet.cli.main", TILES, *step], cwd=folder, check=True,
+                           capture_output=True)
+        if stale:
+            write_content(folder / "in.xyz", FULL_CLOUD)
+        for name in earlier:
+            write_content(folder / name, EARLIER)
+    return build
+
+
+def _tiles() -> list[CommandCase]:
+    t, cloud = TILES, files({"in.xyz": CLOUD})
+    merge = "merge {dir}/plan.json {dir}/0.npz -o"
+    return [
+        CommandCase("same-file/tiles merge into the cloud", t, tiles_work(), f"{merge} {{dir}}/in.xyz --force", BAD,
+                    (INPUT, "{dir}/in.xyz")),
+        CommandCase("twice/tiles merge a piece named twice", t, tiles_work(),
+                    "merge {dir}/plan.json {dir}/0.npz {dir}/0.npz -o {dir}/out.ply", BAD, ("0.npz", "already")),
+        CommandCase("exists/tiles plan", t, files({"in.xyz": CLOUD, "plan.json": EARLIER}),
+                    "plan {dir}/in.xyz -o {dir}/plan.json --method pca", BAD, ("plan.json", "--force")),
+        CommandCase("exists/tiles plan --force", t, files({"in.xyz": CLOUD, "plan.json": EARLIER}),
+                    "plan {dir}/in.xyz -o {dir}/plan.json --method pca --force", OK, outputs=("plan.json",)),
+        CommandCase("exists/tiles merge", t, tiles_work(earlier=("out.ply",)), f"{merge} {{dir}}/out.ply", BAD,
+                    ("out.ply", "--force")),
+        CommandCase("exists/tiles merge --force", t, tiles_work(earlier=("out.ply",)),
+                    f"{merge} {{dir}}/out.ply --force", OK, outputs=("out.ply",)),
+        CommandCase("option/tiles run --job beyond the plan", t, tiles_work(),
+                    "run {dir}/plan.json --job 5 -o {dir}/5.npz", BAD, ("--job", "1 jobs")),
+        CommandCase("naming/tiles plan not .json", t, cloud, "plan {dir}/in.xyz -o {dir}/plan.txt --method pca", BAD,
+                    ("plan.txt", "JSON")),
+        CommandCase("naming/tiles run piece not .npz", t, tiles_work(), "run {dir}/plan.json --job 0 -o {dir}/0.ply",
+                    BAD, ("0.ply", ".npz")),
+        CommandCase("stale/tiles run", t, tiles_work(stale=True), "run {dir}/plan.json --job 0 -o {dir}/1.npz", BAD,
+                    ("{dir}/in.xyz", "changed")),
+        CommandCase("stale/tiles merge", t, tiles_work(stale=True), f"{merge} {{dir}}/out.ply", BAD,
+                    ("{dir}/in.xyz", "changed")),
+    ]
+
+
 def corpus() -> list[CommandCase]:
     """Every case, in a fixed order; names are unique per entry point."""
     cases = [*_same_file(), *_twice(), *_exists(), *_partial(), *_folder(), *_permission(), *_disk_full(),
-             *_signal(), *_release(), *_option(), *_naming(), *_side_file(), *_ply()]
+             *_signal(), *_release(), *_option(), *_naming(), *_side_file(), *_ply(), *_tiles()]
     seen = Counter(case_id(c) for c in cases)
     assert all(n == 1 for n in seen.values()), f"duplicate cases: {[k for k, n in seen.items() if n > 1]}"
     assert all(c.issue in CLASSES and c.entry in ENTRIES for c in cases)
