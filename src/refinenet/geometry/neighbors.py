@@ -125,6 +125,13 @@ def covariances(points: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.nda
 
 
 def smallest_eigenvectors(covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (ascending, M x 3) and the eigenvector of the smallest one (M x 3) of symmetric 3x3 matrices."""
-    w, v = np.linalg.eigh(covs)
-    return w, v[:, :, 0]
+    """Eigenvalues (ascending, M x 3) and the eigenvector of the smallest one (M x 3) of symmetric 3x3 matrices.
+
+    Solved in chunks, so that the M x 3 x 3 eigenvectors of which one column is kept are never all held at once
+    (about 0.7 GB at 10M points); each matrix's solution is the same as in one call."""
+    dtype = np.promote_types(covs.dtype, np.float32)  # eigh's: float32 stays float32
+    w, v = np.empty(covs.shape[:2], dtype), np.empty(covs.shape[:2], dtype)
+    for sl in chunks(len(covs), 9):
+        w[sl], vectors = np.linalg.eigh(covs[sl])
+        v[sl] = vectors[:, :, 0]
+    return w, v

@@ -45,11 +45,7 @@ def orient_mst(points: np.ndarray, normals: np.ndarray, k: int = MST_K) -> np.nd
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     n = len(points)
-    covs = knn_covariances(points, min(GUIDE_K + 1, n))
-    guide = np.empty((n, 3))
-    for sl in chunks(n, 9):
-        guide[sl] = smallest_eigenvectors(covs[sl])[1]
-    del covs
+    guide = smallest_eigenvectors(knn_covariances(points, min(GUIDE_K + 1, n)))[1]
     k = min(k + 1, n)
     neighbours = knn(points, k, with_distances=False, index_dtype=np.int32)[1]
     # The k-NN graph as CSR (row i: its k - 1 neighbours), built without per-edge index or normal copies: at
