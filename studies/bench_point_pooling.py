@@ -100,7 +100,8 @@ def markdown(info: dict, rows: list[dict], args: argparse.Namespace) -> str:
     lines = [
         "# Point module: last layer, BN and max-pool as one step",
         "",
-        "`max_pool_linear_bn` (src/refinenet/network/model.py) against the plain layers (`PointModule.plain_pooling`: "
+        "`max_pool_linear_bn` (src/refinenet/network/pooling.py) against the plain layers "
+        "(`PointModule.plain_pooling`: "
         "Linear(128, 1024) and BN on every point of every patch, then the max-pool), timed alternately in one "
         f"process: a training step (forward, L1 loss, backward, Adam) at the profile's batch, median of {args.repeats} "
         f"runs of {args.steps} steps, and the BN-folded network's inference (`for_inference`), on random inputs of "

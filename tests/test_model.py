@@ -11,7 +11,6 @@ from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
     NetworkConfig,
-    PointBatchNorm,
     RefineNet,
     RotationMatrix,
     TransformationMatrix,
@@ -21,11 +20,11 @@ from refinenet.network.model import (
     for_inference,
     fuse_batch_norm,
     inference_layout,
-    max_pool_linear_bn,
     preset,
     quaternion_to_matrix,
     reduced_precision,
 )
+from refinenet.network.pooling import PointBatchNorm, max_pool_linear_bn
 
 VARIANTS = [(f, c) for f in FEATURES for c in CONNECTIONS if f != "normals" or c == "weight"]
 

@@ -103,8 +103,8 @@ _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn", "geometry.ball")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
              "data.noise", "estimators.baselines", "estimators.smooth_jet", "data.shapes", "data.meshes")
-_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.devices", "network.training",
-            "features.patches", "evaluation.metrics")
+_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.pooling", "network.devices",
+            "network.training", "features.patches", "evaluation.metrics")
 #: The pipeline's declarations, which a script reading the pipeline (`workflow.Pipeline`) imports together.
 _PIPELINE = ("pipeline.methods", "pipeline.layout", "pipeline.catalogue", "pipeline.variants", "pipeline.captions",
              "pipeline.page", "pipeline.steps", "pipeline.workflow", "data.scans")
@@ -244,7 +244,7 @@ def _summary_steps(pipe: Pipeline) -> list[Step]:
         ),
         _table_files(
             "table_time", layout.TIME_FILES, family="time",
-            modules=("pipeline.timing", "network.summary", "network.model", *_TABLE, *_STAGE),
+            modules=("pipeline.timing", "network.summary", "network.model", "network.pooling", *_TABLE, *_STAGE),
             keys=(*DATA_KEYS, "mfps", "features", "clustering.n_clusters", "network", "patches", "inference.device"),
             deps=("results/clouds/test", "results/normals/mfps/test", pipe.variant_dir("features", FULL, "test"),
                   pipe.variant_dir("inference", FULL, "test")),
@@ -338,7 +338,7 @@ def _report_steps(pipe: Pipeline) -> list[Step]:
         ),
         Step(
             name="table_architecture", family="architecture",
-            modules=("network.summary", "network.model", *_TABLE, *_STAGE),
+            modules=("network.summary", "network.model", "network.pooling", *_TABLE, *_STAGE),
             keys=(*ARCHITECTURE_KEYS, *(f"variants.{v}" for v in ARCHITECTURE if v != FULL)),
             deps=(), outs=tuple(layout.ARCHITECTURE_FILES.values()),
             targets=lambda: list(layout.ARCHITECTURE_FILES.values()),
