@@ -319,11 +319,13 @@ def test_runs_on_cuda_under_no_grad():
     torch.testing.assert_close(out.cpu(), reference, rtol=0, atol=5e-3)  # cuDNN convolutions may use TF32
 
 
-def test_the_inference_layout_computes_what_the_training_layout_does():
-    """Chunks of 64 patches and channels-last height maps: 150 patches (two full chunks and a part) give the
-    normals of the whole batch at once, up to float32 rounding."""
+@pytest.mark.parametrize("connection, at_once", [("weight", True), ("rot", False), ("concat", False)])
+def test_the_inference_layout_computes_what_the_training_layout_does(connection, at_once):
+    """Chunks of 64 patches, channels-last height maps and, for Refine-Net's connection only, the branches at once:
+    150 patches (two full chunks and a part) give the normals of the whole batch at once, branch by branch, up to
+    float32 rounding."""
     torch.manual_seed(0)
-    model = RefineNet(preset("release"))
+    model = RefineNet(preset("release", connection=connection))
     for seed in range(3):
         model(*_inputs(model.config, 16, seed=seed))
     model.eval()
@@ -332,6 +334,7 @@ def test_the_inference_layout_computes_what_the_training_layout_does():
         reference = model(*inputs)
         laid_out = inference_layout(model)(*inputs)
     assert model.point_module.chunk == 64 and model.height_map_module.memory_format == torch.channels_last
+    assert model.branches_at_once == at_once
     torch.testing.assert_close(laid_out, reference, rtol=0, atol=1e-5)
 
 

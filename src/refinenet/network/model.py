@@ -253,7 +253,11 @@ class WeightMatrix(Refinement):
         super().__init__(in_dim, FEATURE_DIM * in_dim, FEATURE_DIM)
 
     def forward(self, u: Tensor, t: Tensor) -> Tensor:
-        return torch.bmm(t.view(-1, FEATURE_DIM, self.in_dim), u.unsqueeze(2)).squeeze(2)
+        return self.columns(u.unsqueeze(2), t).squeeze(2)
+
+    def columns(self, u: Tensor, t: Tensor) -> Tensor:
+        """Y = T u for each column of u (B, in_dim, X): one product for the X branches that share T."""
+        return torch.bmm(t.view(-1, FEATURE_DIM, self.in_dim), u)
 
 
 def quaternion_to_matrix(q: Tensor) -> Tensor:
@@ -417,6 +421,8 @@ class RefineNet(nn.Module):
             self.height_map_module = HeightMapModule(config.n_normals, config.hmp_size, channels, hidden,
                                                      dims[-1], config.dropout)
         self.connections = nn.ModuleList(connections)
+        self.branches_at_once = False
+        """True: the branches are computed together (`_all_branches`); set by `inference_layout`."""
         if connections:
             self.output_module = OutputModule(config.n_normals * connections[0].out_dim, config.output_fc,
                                               config.dropout, config.output, config.n_normals)
@@ -441,8 +447,28 @@ class RefineNet(nn.Module):
                 raise ValueError(f"heights must have shape (B, {x}, {m}, {m}), got {_shape(heights)}")
             features.append(self.height_map_module(heights))
         v = normals.reshape(-1, x, 3)
-        branches = [conn(v[:, b], features) for b, conn in enumerate(self.connections)]
-        return self.output_module(torch.cat(branches, dim=1), normals)
+        if self.branches_at_once:
+            branches = self._all_branches(v, features)
+        else:
+            branches = torch.cat([conn(v[:, b], features) for b, conn in enumerate(self.connections)], dim=1)
+        return self.output_module(branches, normals)
+
+    def _all_branches(self, v: Tensor, features: Sequence[Tensor]) -> Tensor:
+        """What the X connection modules output, concatenated, when every refinement is a `WeightMatrix`: T_p and
+        T_h are shared by the branches of a sample, so each refinement of the X normals v (B, X, 3) is one
+        product of T with the matrix of their inputs, not X matrix-vector products."""
+        y, ys = v.transpose(1, 2), []
+        for step, t in zip(self.connections[0].refinements, features, strict=True):
+            y = step.columns(y, t)
+            ys.append(y.transpose(1, 2))
+        z = torch.stack([conn.normal_fc(v[:, b]) for b, conn in enumerate(self.connections)], dim=1)
+        return torch.cat([*ys, z], dim=2).reshape(len(v), -1)
+
+    @property
+    def shares_weight_matrices(self) -> bool:
+        """Whether every refinement of every branch is a `WeightMatrix` (Refine-Net's connection)."""
+        return bool(self.connections) and all(isinstance(step, WeightMatrix) for conn in self.connections
+                                              for step in conn.refinements)
 
 
 def fuse_batch_norm(model: RefineNet) -> RefineNet:
@@ -501,10 +527,12 @@ def for_inference(model: RefineNet, fuse: bool, precision: str) -> RefineNet:
 
 
 def inference_layout(model: RefineNet) -> RefineNet:
-    """`model` itself, set to compute its feature modules the faster way without gradients: the point module
-    INFERENCE_CHUNK patches at a time, the height maps channels-last (oneDNN's faster layout for small maps). Each
-    module takes half the time on a 2-core CPU, with the same outputs in bfloat16 and equal up to float32 rounding
-    in float32 (benchmarks/results/cli.md). Training keeps the default layout, which its gradients were tuned on."""
+    """`model` itself, set to compute the faster way without gradients: the point module INFERENCE_CHUNK patches at
+    a time, the height maps channels-last (oneDNN's faster layout for small maps), and the X branches of Refine-Net's
+    connection together (`RefineNet._all_branches`). The feature modules take half the time on a 2-core CPU, the
+    connections a fifth; the outputs equal the training layout's up to float32 rounding (benchmarks/results/
+    cli.md). Training keeps the default layout, which its gradients were tuned on."""
+    model.branches_at_once = model.shares_weight_matrices
     if model.point_module is not None:
         model.point_module.chunk = INFERENCE_CHUNK
     if model.height_map_module is not None:
