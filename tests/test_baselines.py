@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from known_shapes import fibonacci_sphere
 
-from refinenet.estimators.baselines import jet_normals, pca_normals
+from refinenet.estimators.baselines import jet_fit, jet_normals, pca_normals
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.geometry.neighbors import covariances, knn
 
@@ -57,6 +57,39 @@ def test_jet_beats_pca_on_curved_noise_free_cylinder():
     err_pca = unoriented_angles(pca_normals(points, 60), truth)[interior].mean()
     err_jet = unoriented_angles(jet_normals(points, 60), truth)[interior].mean()
     assert err_jet < 0.01 < err_pca
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3])
+def test_jet_fit_is_the_least_squares_height_function_in_the_pca_frame(degree):
+    """Each neighbourhood's jet against its definition solved by numpy's least squares: in the neighbourhood's PCA
+    frame (normal-like axis first) centred on the query point and scaled to unit size, z = sum c_ij x^i y^j over
+    i + j <= degree; the normal is (1, -c_x, -c_y) in that frame; the residual is the RMS height over k - #c."""
+    rng = np.random.default_rng(degree)
+    points = rng.normal(size=(400, 3)) * [1.0, 1.0, 0.1] + [1e3, -2e3, 5e2]
+    _, idx = knn(points, 25)
+    normals, residuals = jet_fit(points, idx, degree)
+    _, covs = covariances(points, idx)
+    for i in (0, 17, 399):
+        frame = np.linalg.eigh(covs[i])[1]
+        uvw = (points[idx[i]] - points[idx[i, 0]]) @ frame
+        uvw /= np.linalg.norm(uvw, axis=1).max()
+        columns = np.stack([uvw[:, 1] ** (t - j) * uvw[:, 2] ** j for t in range(degree + 1) for j in range(t + 1)], 1)
+        coef, *_ = np.linalg.lstsq(columns, uvw[:, 0], rcond=None)
+        normal = frame @ [1.0, -coef[1], -coef[2]]
+        assert unoriented_angles(normals[i:i + 1], normal[None, :] / np.linalg.norm(normal))[0] < 1e-6
+        rms = np.linalg.norm(uvw[:, 0] - columns @ coef) / np.sqrt(25 - len(coef))
+        scale = np.linalg.norm(points[idx[i]] - points[idx[i, 0]], axis=1).max()
+        np.testing.assert_allclose(residuals[i], rms * scale, rtol=1e-6)
+
+
+def test_jet_residual_is_the_noise_of_a_noisy_plane():
+    """On a plane with Gaussian noise sigma along its normal, the RMS residual (squares over k minus the six
+    coefficients) estimates sigma."""
+    rng = np.random.default_rng(5)
+    points = np.c_[rng.uniform(-1, 1, size=(20_000, 2)), rng.normal(0, 0.01, 20_000)]
+    _, idx = knn(points, 200)
+    _, residuals = jet_fit(points, idx)
+    assert abs(np.median(residuals) / 0.01 - 1) < 0.05
 
 
 def test_pca_agrees_with_open3d():

@@ -6,6 +6,7 @@ Both return unit, unoriented normals (N x 3). Neighbourhoods are kNN with the po
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from refinenet.config import BaselineConfig
 from refinenet.data.shapes import BIG_NOISE
@@ -41,12 +42,6 @@ def pca_normals(points: np.ndarray, k: int) -> np.ndarray:
     return smallest_eigenvectors(knn_covariances(points, k))[1]
 
 
-def _monomials(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
-    """Columns x^i y^j with i + j <= degree, ordered by total degree (1, x, y, x^2, xy, y^2, ...)."""
-    cols = [x ** (d - j) * y ** j for d in range(degree + 1) for j in range(d + 1)]
-    return np.stack(cols, axis=-1)
-
-
 def jet_normals(points: np.ndarray, k: int, degree: int = 2) -> np.ndarray:
     """Normal of an osculating jet (Cazals & Pouget 2005): a least-squares height function of `degree`."""
     points = np.asarray(points, dtype=np.float64)
@@ -61,31 +56,103 @@ def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.nd
     fitted with z = sum a_ij x^i y^j; the normal at the origin is (-a_x, -a_y, 1) mapped back to world. The
     residual's squares are divided by k minus the number of coefficients (at least 1; an exact fit has none), so
     that on a noisy plane it estimates the noise's standard deviation. Chunks of neighbourhoods are fitted on
-    `native_threads` threads.
+    `native_threads` threads, by a kernel that holds one neighbourhood's normal equations at a time.
     """
     n_coef = (degree + 1) * (degree + 2) // 2
     m, k = idx.shape
     if k < n_coef:
         raise ValueError(f"jet of degree {degree} needs k >= {n_coef} neighbours, got k = {k}")
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    idx = np.ascontiguousarray(idx, dtype=np.int64)
     _, covs = covariances(points, idx)
     _, frames = np.linalg.eigh(covs)  # columns: normal-like axis first, then the two tangent axes
     normals, residuals = np.empty((m, 3)), np.empty(m)
-
-    def fit(sl: slice) -> None:
-        local = points[idx[sl]] - points[idx[sl, 0], None, :]
-        uvw = np.einsum("nkj,nji->nki", local, frames[sl])  # coordinates along (e1, e2, e3)
-        scale = np.linalg.norm(uvw, axis=2).max(axis=1)[:, None]
-        scale[scale == 0] = 1.0
-        z, x, y = (uvw[:, :, 0] / scale, uvw[:, :, 1] / scale, uvw[:, :, 2] / scale)
-        a = _monomials(x, y, degree)
-        ata = np.einsum("nki,nkj->nij", a, a)
-        atz = np.einsum("nki,nk->ni", a, z)
-        coef = np.linalg.solve(ata + 1e-12 * np.eye(n_coef), atz[..., None])[..., 0]
-        local_normal = np.stack([np.ones(len(coef)), -coef[:, 1], -coef[:, 2]], axis=1)
-        world = np.einsum("nij,nj->ni", frames[sl], local_normal)
-        normals[sl] = world / np.linalg.norm(world, axis=1, keepdims=True)
-        heights = z - np.einsum("nki,ni->nk", a, coef)
-        residuals[sl] = scale[:, 0] * np.sqrt((heights ** 2).sum(axis=1) / max(k - n_coef, 1))
-
-    thread_map(fit, chunks(m, k))
+    thread_map(lambda sl: _fit_jets(points, idx[sl], frames[sl], degree, normals[sl], residuals[sl]), chunks(m, k))
     return normals, residuals
+
+
+@njit(nogil=True, cache=True)
+def _fit_jets(points, idx, frames, degree, normals, residuals):
+    """`jet_fit` of each row of idx with its frame, into normals and residuals: the least-squares fit by the
+    normal equations (A^T A + 1e-12 I) c = A^T z, A's columns the monomials x^i y^j, i + j <= degree, ordered
+    by total degree (1, x, y, x^2, xy, y^2, ...)."""
+    m, k = idx.shape
+    n_coef = (degree + 1) * (degree + 2) // 2
+    uvw = np.empty((k, 3))
+    a = np.empty(n_coef)
+    ata = np.empty((n_coef, n_coef))
+    atz = np.empty(n_coef)
+    for row in range(m):
+        f = frames[row]
+        q = idx[row, 0]
+        scale = 0.0
+        for j in range(k):
+            p = idx[row, j]
+            d0, d1, d2 = points[p, 0] - points[q, 0], points[p, 1] - points[q, 1], points[p, 2] - points[q, 2]
+            for c in range(3):
+                uvw[j, c] = d0 * f[0, c] + d1 * f[1, c] + d2 * f[2, c]
+            scale = max(scale, np.sqrt(uvw[j, 0] ** 2 + uvw[j, 1] ** 2 + uvw[j, 2] ** 2))
+        if scale == 0.0:
+            scale = 1.0
+        ata[:] = 0.0
+        atz[:] = 0.0
+        for j in range(k):
+            _monomials(uvw[j, 1] / scale, uvw[j, 2] / scale, degree, a)
+            z = uvw[j, 0] / scale
+            for r in range(n_coef):
+                atz[r] += a[r] * z
+                for c in range(n_coef):
+                    ata[r, c] += a[r] * a[c]
+        for r in range(n_coef):
+            ata[r, r] += 1e-12
+        _solve(ata, atz)
+        coef = atz
+        w0 = f[0, 0] - coef[1] * f[0, 1] - coef[2] * f[0, 2]
+        w1 = f[1, 0] - coef[1] * f[1, 1] - coef[2] * f[1, 2]
+        w2 = f[2, 0] - coef[1] * f[2, 1] - coef[2] * f[2, 2]
+        length = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+        normals[row, 0], normals[row, 1], normals[row, 2] = w0 / length, w1 / length, w2 / length
+        squares = 0.0
+        for j in range(k):
+            _monomials(uvw[j, 1] / scale, uvw[j, 2] / scale, degree, a)
+            height = uvw[j, 0] / scale
+            for c in range(n_coef):
+                height -= a[c] * coef[c]
+            squares += height * height
+        residuals[row] = scale * np.sqrt(squares / max(k - n_coef, 1))
+
+
+@njit(nogil=True, cache=True)
+def _monomials(x, y, degree, out):
+    """out = x^i y^j with i + j <= degree, ordered by total degree (1, x, y, x^2, xy, y^2, ...)."""
+    column = 0
+    for total in range(degree + 1):
+        for j in range(total + 1):
+            out[column] = x ** (total - j) * y ** j
+            column += 1
+
+
+@njit(nogil=True, cache=True)
+def _solve(matrix, rhs):
+    """rhs = matrix^-1 rhs by Gaussian elimination with partial pivoting (LAPACK's gesv), both overwritten: one
+    small system per neighbourhood, without the allocations of np.linalg.solve."""
+    n = len(rhs)
+    for col in range(n):
+        pivot = col
+        for r in range(col + 1, n):
+            if abs(matrix[r, col]) > abs(matrix[pivot, col]):
+                pivot = r
+        if pivot != col:
+            for c in range(n):
+                matrix[col, c], matrix[pivot, c] = matrix[pivot, c], matrix[col, c]
+            rhs[col], rhs[pivot] = rhs[pivot], rhs[col]
+        for r in range(col + 1, n):
+            factor = matrix[r, col] / matrix[col, col]
+            for c in range(col + 1, n):
+                matrix[r, c] -= factor * matrix[col, c]
+            rhs[r] -= factor * rhs[col]
+    for r in range(n - 1, -1, -1):
+        total = rhs[r]
+        for c in range(r + 1, n):
+            total -= matrix[r, c] * rhs[c]
+        rhs[r] = total / matrix[r, r]
