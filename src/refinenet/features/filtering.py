@@ -9,7 +9,8 @@ the k-d tree's leaf order) and the whole cloud. The per-pair sums are sparse-tim
 a (chunk x pairs) CSC matrix holds the spatial weight of pair p in row i_p, so the pairs need no sorting.
 Weights are evaluated in float32, the precision of the output. Each point's sum runs over its neighbours in
 index order, whatever the k-d tree's shape, so a point gets bit-identical normals in any cloud that holds its
-ball in the same order (a tile of a large cloud, `geometry.tiles`).
+ball in the same order (a tile of a large cloud, `geometry.tiles`). Chunks write disjoint rows, so they run on
+`native_threads` threads (the query, the sort and the products release the GIL) with the same result.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import scipy.sparse as sp
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.frames import target_sign
 from refinenet.geometry.neighbors import CHUNK_ELEMENTS, build_tree, chunks
-from refinenet.threads import native_threads
+from refinenet.threads import native_threads, thread_map
 
 #: Ball pairs per chunk, about 150 bytes of intermediates each (~40 MB). Run time hardly depends on it: 100k
 #: points took 3.5-3.7 s of CPU with 100k to 2M pairs per chunk.
@@ -58,7 +59,8 @@ def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
     ball_sizes = tree.query_ball_point(points, radius, return_length=True, workers=native_threads())
     axes = [np.ascontiguousarray(n0[:, a]) for a in range(3)]  # 1-D gathers beat one N x 3 gather
     sums = np.empty((len(points), len(spatial_coef), len(range_coef), 3), dtype=np.float32)
-    for sl in chunks(len(points), int(ball_sizes.max()), PAIRS_PER_CHUNK):
+
+    def fill(sl: slice) -> None:
         rows = tree.indices[sl]  # leaf order: a compact region, which keeps the dual-tree query cheap
         pairs = build_tree(points[rows]).sparse_distance_matrix(tree, radius, output_type="ndarray")
         pairs = pairs[np.lexsort((pairs["j"], pairs["i"]))]  # sums in neighbour order, not the tree's
@@ -74,6 +76,8 @@ def bilateral_filter(points: np.ndarray, normals: np.ndarray, r_f: float = 0.03,
         for s, inv_c2 in enumerate(spatial_coef):
             weights = sp.csc_array((np.exp(-d2 * inv_c2), i, columns), shape=(len(rows), len(i)))
             sums[rows, s] = (weights @ summands).reshape(len(rows), len(range_coef), 3)
+
+    thread_map(fill, chunks(len(points), int(ball_sizes.max()), PAIRS_PER_CHUNK))
     filtered = sums / np.linalg.norm(sums, axis=-1, keepdims=True)
     filtered = filtered.reshape(len(points), -1)
     return np.concatenate([n0, filtered], axis=1) if include_initial else filtered
