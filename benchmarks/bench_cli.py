@@ -10,7 +10,7 @@ command runs as a whole process under /usr/bin/time -v (start-up, reading and wr
   MST orientation, `--precision auto`), and again with `--precision float32` where auto picks bfloat16;
 * the peers of `peers.py`, each on its own threads (Open3D on every core, CGAL and DISNE on one).
 
-    python benchmarks/bench_cli.py --points 100000 1000000 [--threads 2] [--disne DISNE_FOLDER]
+    python benchmarks/bench_cli.py --points 100000 1000000 [--threads 2] [--disne DISNE_FOLDER] [--peers PEER ...]
 
 Targets (project issue): 100k points in at most 15 s on 2 cores; 10M points in at most 25 minutes with a peak of
 at most 4 GB; per thread at least DISNE's points per second. Each --points value is one case in
@@ -27,12 +27,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import torch
 from machine import machine_info
-from peers import peers
+from peers import PEERS, peers
 from torch.utils.flop_counter import FlopCounterMode
 
 from refinenet.atomic import write_text
@@ -107,7 +108,9 @@ def accuracy(normals: np.ndarray, truth: np.ndarray) -> dict[str, float]:
             "outward": float((np.einsum("ij,ij->i", normals, truth) > 0).mean())}
 
 
-def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, flops: float) -> dict:
+def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, flops: float,
+         chosen: Sequence[str] | None = None) -> dict:
+    """One cloud size: ours, then the peers (those named in `chosen`, or all)."""
     points, truth = noisy_cloud(n)
     source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
     write_ply(source, points)
@@ -129,6 +132,9 @@ def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, 
     runs, result["skipped"] = peers(source, xyz, bbox_diagonal(points), folder, disne)
     result["peers"] = {}
     for peer in runs:
+        if chosen is not None and peer.name not in chosen:
+            result["skipped"][peer.name] = f"left out of the {n:,}-point case (--peers)"
+            continue
         try:
             timing = timed(peer.command, peer.env)
         except RuntimeError as err:
@@ -283,13 +289,15 @@ def main() -> None:
     parser.add_argument("--no-float32", dest="float32", action="store_false",
                         help="skip the second run with --precision float32 (it doubles the time)")
     parser.add_argument("--disne", type=Path, help="a DISNE folder made by ../shared/peers/disne/prepare.sh")
+    parser.add_argument("--peers", nargs="+", choices=PEERS, metavar="PEER",
+                        help=f"run only these peers (default: every one installed): {', '.join(PEERS)}")
     args = parser.parse_args()
     flops = network_flops_per_point()
     path = RESULTS / "cli.json"
     cases = json.loads(path.read_text()) if path.exists() else {}
     for n in args.points:
         with tempfile.TemporaryDirectory() as folder:
-            cases[str(n)] = case(n, args.threads, Path(folder), args.float32, args.disne, flops)
+            cases[str(n)] = case(n, args.threads, Path(folder), args.float32, args.disne, flops, args.peers)
         print(json.dumps(cases[str(n)], indent=1))
         write_text(path, json.dumps(cases, indent=1) + "\n")
         write_text(RESULTS / "cli.md", report(cases))

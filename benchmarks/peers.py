@@ -44,6 +44,8 @@ else:
     psp.vcm_estimate_normals(points, float(sys.argv[4]), float(sys.argv[5]))
 points.write(sys.argv[2])
 """
+#: The peers' names, as `peers` gives them.
+PEERS = ("open3d", "cgal_jet18", "cgal_jet50", "cgal_jet100", "cgal_vcm", "disne")
 #: VCM's offset and convolution radii, in bounding-box diagonals.
 VCM_RADIUS = 0.02
 #: One thread for the single-threaded peers: their thread pools sized to one, and the process pinned to one core
