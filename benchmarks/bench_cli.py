@@ -22,8 +22,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
-import re
-import subprocess
 import sys
 import tempfile
 import time
@@ -33,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from machine import machine_info
-from peers import PEERS, peers
+from peers import PEERS, peers, timed_process
 from torch.utils.flop_counter import FlopCounterMode
 
 from refinenet.atomic import write_text
@@ -87,21 +85,6 @@ def _seconds(fn) -> float:
     return time.perf_counter() - start
 
 
-def timed(command: list[str], env: dict[str, str] | None = None) -> dict[str, float]:
-    """Wall seconds, CPU seconds and peak resident memory (GB) of a whole process, from /usr/bin/time -v, and the
-    strata `refinenet normals` says it used (1 when it names none)."""
-    run = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True, env=env)
-    if run.returncode != 0:
-        raise RuntimeError(f"failed: {' '.join(command)[:300]}\n{run.stderr[-2000:]}")
-    report = dict(line.strip().split(": ", 1) for line in run.stderr.splitlines() if ": " in line)
-    clock = [float(x) for x in re.split("[:]", report["Elapsed (wall clock) time (h:mm:ss or m:ss)"])]
-    wall = sum(x * 60 ** i for i, x in enumerate(reversed(clock)))
-    strata = re.search(r"(\d+) strata", run.stderr)
-    return {"wall_s": wall, "cpu_s": float(report["User time (seconds)"]) + float(report["System time (seconds)"]),
-            "peak_gb": int(report["Maximum resident set size (kbytes)"]) / 2**20,
-            "strata": int(strata.group(1)) if strata else 1}
-
-
 def accuracy(normals: np.ndarray, truth: np.ndarray) -> dict[str, float]:
     angles = unoriented_angles(normals, truth)
     return {"mean_deg": float(angles.mean()), "rmse_deg": float(np.sqrt((angles ** 2).mean())),
@@ -123,11 +106,13 @@ def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, 
               "networks": json.loads((SHIPPED / CARD_JSON).read_text())["fingerprint"],
               "network_flops_per_point": flops}
     command = [str(Path(sys.executable).with_name("refinenet")), "normals", str(source), "--threads", str(threads)]
-    result["ours"] = timed([*command, "-o", str(folder / "ours.ply"), "--timings", str(folder / "stages.json")])
+    result["ours"] = timed_process([*command, "-o", str(folder / "ours.ply"), "--timings",
+                                    str(folder / "stages.json")])
     result["ours"].update(accuracy(read_cloud(folder / "ours.ply").normals, truth))
     result["stages"] = json.loads((folder / "stages.json").read_text())["stages"]
     if float32 and precision != "float32":
-        result["ours_float32"] = timed([*command, "-o", str(folder / "ours_float32.ply"), "--precision", "float32"])
+        result["ours_float32"] = timed_process([*command, "-o", str(folder / "ours_float32.ply"), "--precision",
+                                                "float32"])
         result["ours_float32"].update(accuracy(read_cloud(folder / "ours_float32.ply").normals, truth))
     runs, result["skipped"] = peers(source, xyz, bbox_diagonal(points), folder, disne)
     result["peers"] = {}
@@ -136,7 +121,7 @@ def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, 
             result["skipped"][peer.name] = f"left out of the {n:,}-point case (--peers)"
             continue
         try:
-            timing = timed(peer.command, peer.env)
+            timing = timed_process(peer.command, peer.env)
         except RuntimeError as err:
             result["skipped"][peer.name] = str(err).splitlines()[-1]
             continue

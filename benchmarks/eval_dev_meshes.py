@@ -1,10 +1,11 @@
-"""Refine-Net (the shipped networks, as `refinenet normals` runs them) against PCA (best of k = 30, 50, 100), Jet
-and MFPS on the shared development meshes, at the synthetic benchmark's test noise levels.
+"""Refine-Net (the shipped networks, as `refinenet normals` runs them) against PCA (best of k = 30, 50, 100), Jet,
+MFPS and the other tools (CGAL's jet and VCM, the learned DISNE) on the shared development meshes, at the synthetic
+benchmark's test noise levels.
 
 Answers the accuracy requirement: "Evaluate the trained networks on the shared development meshes (100k points,
 the paper's test noise levels per category) against PCA (best of k = 30, 50, 100), Jet and MFPS"; the networks
-must be below all three in every category. It also keeps the older check that MFPS beats PCA and Jet on the sharp
-meshes.
+must be below all of them, and below every peer the run has, in mean and RMSE in every category. It also keeps the
+older check that MFPS beats PCA and Jet on the sharp meshes.
 
 Every mesh of ../shared/data/meshes/dev/<sharp|smooth|rich>/ is sampled area-uniformly (ground truth: the normal
 of the face a point lies on) and perturbed with Gaussian noise in percent of the bounding-box diagonal. The
@@ -14,13 +15,20 @@ a rich one at RichFeature's (params.yaml `noise.test`), and every mesh at BigNoi
 the k of lowest mean error ("PCA (best k)"); `jet_normals` with params.yaml's `baselines` (k = 100, 200 on
 BigNoise, degree 2); MFPS with params.yaml's `mfps` (no profile: the paper's synthetic settings); Refine-Net is
 `cli.estimate.estimate_normals` with the shipped release (its own MFPS, l_d from the point spacing, the default
-`--precision auto`), which never saw these meshes. Errors are unoriented angles; categories follow the synthetic
+`--precision auto`), which never saw these meshes. The peers run as whole processes on the same noisy cloud
+(`peers.py`: CGAL's `jet_estimate_normals` at k = 18, 50, 100 and `vcm_estimate_normals`, one thread each, from the
+`peers` extra; DISNE from a folder made by ../shared/peers/disne/prepare.sh, one thread); one not installed is left
+out, with the reason in the report. Open3D's PCA is not run: `pca_normals` gives its normals (benchmarks/results/
+pca.md), so the PCA rows stand for it. Errors are unoriented angles; categories follow the synthetic
 protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-weighted RMSE, unweighted Average).
 "Near edges" are the points whose 10 nearest clean-sample neighbours include a ground-truth normal more than 30
 degrees away.
 
     python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2] [--methods refinenet]
-                                         [--release FOLDER --out DIR]
+                                         [--disne DISNE_FOLDER] [--release FOLDER --out DIR]
+
+The report has the tables per category, per noise level and per cloud, each method's wall seconds per 100,000
+points, and a plot of the mean error against the noise level per method and category (dev_meshes.png).
 
 `--methods` reruns only some methods (after a change to Refine-Net, say) and keeps the other methods' rows from
 the committed run (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh and the level.
@@ -29,37 +37,47 @@ the committed run (`--reuse`), whose clouds are the same: every cloud's seeds de
 e.g. a candidate setting's) in place of the shipped ones; its results go under `--out`, a folder outside
 benchmarks/results, which holds the shipped networks' evaluation only.
 
-Writes benchmarks/results/dev_meshes.json and dev_meshes.md (or under `--out`). Wall and CPU seconds are recorded
-for every run (one run each), with the load average at start and end. Each finished cloud's rows are appended to
-dev_meshes.partial.jsonl beside them, so that a killed run (the whole takes hours on 2 cores) resumes where it
-stopped when started again with the same settings; the file is removed once the results are written.
+Writes benchmarks/results/dev_meshes.json, dev_meshes.md and dev_meshes.png (or under `--out`). Wall and CPU
+seconds are recorded for every run (one run each), with the load average at start and end. Each finished cloud's
+rows are appended to dev_meshes.partial.jsonl beside them, so that a killed run (the whole takes hours on 2 cores)
+resumes where it stopped when started again with the same settings; the file is removed once the results are
+written.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
-from bench_mfps import machine, near_edges
-from machine import shipped_networks, write_results
+import matplotlib
 
-from refinenet import config as params_lib
-from refinenet.cli.estimate import estimate_normals
-from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh
-from refinenet.data.noise import add_gaussian_noise, derive_seed
-from refinenet.estimators.baselines import jet_normals, pca_normals
-from refinenet.estimators.mfps import mfps_normals
-from refinenet.evaluation.metrics import ErrorStats, unoriented_angles
-from refinenet.evaluation.table import METHOD_NAMES, aggregate, stats_row, to_csv_frame
-from refinenet.network.devices import resolve_device, resolve_precision
-from refinenet.network.release import SHIPPED, load_release
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from bench_mfps import machine, near_edges  # noqa: E402
+from machine import shipped_networks, write_results  # noqa: E402
+from peers import PEERS, cgal_missing, disne_missing, peers, timed_process  # noqa: E402
+
+from refinenet import config as params_lib  # noqa: E402
+from refinenet.atomic import atomic_path  # noqa: E402
+from refinenet.cli.estimate import estimate_normals  # noqa: E402
+from refinenet.data.io import write_ply  # noqa: E402
+from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh  # noqa: E402
+from refinenet.data.noise import add_gaussian_noise, bbox_diagonal, derive_seed  # noqa: E402
+from refinenet.estimators.baselines import jet_normals, pca_normals  # noqa: E402
+from refinenet.estimators.mfps import mfps_normals  # noqa: E402
+from refinenet.evaluation.metrics import ErrorStats, unoriented_angles  # noqa: E402
+from refinenet.evaluation.table import METHOD_NAMES, aggregate, stats_row, to_csv_frame  # noqa: E402
+from refinenet.network.devices import resolve_device, resolve_precision  # noqa: E402
+from refinenet.network.release import SHIPPED, load_release  # noqa: E402
 
 #: params.yaml as written (no profile): the paper's synthetic settings of the baselines, MFPS and the noise.
 PARAMS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False)
@@ -77,11 +95,17 @@ GLOBAL_SEED = 2022
 METRICS = ("mean", "rmse", "pgp5", "pgp10")
 PCA_KS = (30, 50, 100)
 PCA_BEST = "pca_best"
-NAMES = {**METHOD_NAMES, **{f"pca{k}": f"PCA k = {k}" for k in PCA_KS}, PCA_BEST: "PCA (best k)"}
-#: The methods Refine-Net must beat in every category.
-RIVALS = (PCA_BEST, "jet", "mfps")
-#: Every method run on each cloud.
-METHODS = (*(f"pca{k}" for k in PCA_KS), "jet", "mfps", "refinenet")
+#: The other tools, run as whole processes by `peers.py` (Open3D's PCA is not among them: `pca_normals` gives its
+#: normals within 1.2e-6 deg, benchmarks/results/pca.md, so the PCA rows stand for it at each k).
+PEER_METHODS = tuple(p for p in PEERS if p != "open3d")
+NAMES = {**METHOD_NAMES, **{f"pca{k}": f"PCA k = {k}" for k in PCA_KS}, PCA_BEST: "PCA (best k)",
+         **{f"cgal_jet{k}": f"CGAL jet k = {k}" for k in (18, 50, 100)}, "cgal_vcm": "CGAL VCM", "disne": "DISNE"}
+#: The methods Refine-Net must beat in every category (of those the run has).
+RIVALS = (PCA_BEST, "jet", "mfps", *PEER_METHODS)
+#: Every method, in the order of the tables.
+METHODS = (*(f"pca{k}" for k in PCA_KS), "jet", "mfps", *PEER_METHODS, "refinenet")
+#: Methods drawn in the plot of mean error against noise (the PCA of each category's best k stands for PCA).
+PLOTTED = (PCA_BEST, "jet", "mfps", *PEER_METHODS, "refinenet")
 
 
 def dev_meshes(root: Path) -> list[tuple[str, Path]]:
@@ -119,8 +143,9 @@ def noisy_sample(key: str, path: Path, noise: float, n_points: int) -> tuple[np.
 
 
 def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: int, threads: int,
-                   release, only: tuple[str, ...] = METHODS) -> list[dict]:
-    """One per-cloud statistics row per method of `only`, with timings and near-edge errors."""
+                   release, only: tuple[str, ...] = METHODS, disne: Path | None = None) -> list[dict]:
+    """One per-cloud statistics row per method of `only`, with timings and near-edge errors; a peer that is not
+    installed gives no row."""
     clean, truth, points, sample_seed, noise_seed = noisy_sample(key, path, noise, n_points)
     near = near_edges(clean, truth)
     b = PARAMS.baselines
@@ -131,18 +156,45 @@ def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: 
         "mfps": lambda: mfps_normals(points, PARAMS.mfps, workers=threads),
         "refinenet": lambda: estimate_normals(points, release, "refinenet", workers=threads),
     }
+    runs = {name: lambda method=method: timed(method) for name, method in methods.items()}
     rows = []
-    for method in only:
-        normals, wall, cpu = timed(methods[method])
-        angles = unoriented_angles(normals, truth)
-        row = stats_row(method, category, f"{Path(key).stem}_n{noise}", ErrorStats.from_angles(angles))
-        row.update(mesh=Path(key).stem, noise=noise, seconds=wall, cpu_seconds=cpu,
-                   near_edge_points=int(near.sum()), near_edge_sum_deg=float(angles[near].sum()),
-                   sample_seed=sample_seed, noise_seed=noise_seed)
-        rows.append(row)
-        print(f"{category:13s} {key:24s} {noise:4.2f}% {NAMES[method]:12s} mean {row['mean']:6.2f}  {wall:6.1f} s",
-              flush=True)
+    with tempfile.TemporaryDirectory() as folder:
+        if any(m in PEER_METHODS for m in only):
+            runs |= peer_methods(points, Path(folder), disne, [m for m in only if m in PEER_METHODS])
+        for method in (m for m in only if m in runs):
+            normals, wall, cpu = runs[method]()
+            rows.append(cloud_row(method, category, key, noise, normals, truth, near, wall, cpu, sample_seed,
+                                  noise_seed))
     return rows
+
+
+def peer_methods(points: np.ndarray, folder: Path, disne: Path | None,
+                 chosen: list[str]) -> dict[str, Callable[[], tuple[np.ndarray, float, float]]]:
+    """The installed peers of `chosen` on the cloud (written to `folder` as binary .ply and .xyz), each a call that
+    gives its normals and the wall and CPU seconds of its whole process."""
+    source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
+    write_ply(source, points)
+    np.savetxt(xyz, points, fmt="%.9g")
+    runs, _ = peers(source, xyz, bbox_diagonal(points), folder, disne)
+
+    def run(peer) -> tuple[np.ndarray, float, float]:
+        timing = timed_process(peer.command, peer.env)
+        return peer.normals(len(points)), timing["wall_s"], timing["cpu_s"]
+
+    return {peer.name: lambda peer=peer: run(peer) for peer in runs if peer.name in chosen}
+
+
+def cloud_row(method: str, category: str, key: str, noise: float, normals: np.ndarray, truth: np.ndarray,
+              near: np.ndarray, wall: float, cpu: float, sample_seed: int, noise_seed: int) -> dict:
+    """The per-cloud statistics row of one method's normals."""
+    angles = unoriented_angles(normals, truth)
+    row = stats_row(method, category, f"{Path(key).stem}_n{noise}", ErrorStats.from_angles(angles))
+    row.update(mesh=Path(key).stem, noise=noise, seconds=wall, cpu_seconds=cpu,
+               near_edge_points=int(near.sum()), near_edge_sum_deg=float(angles[near].sum()),
+               sample_seed=sample_seed, noise_seed=noise_seed)
+    print(f"{category:13s} {key:24s} {noise:4.2f}% {NAMES[method]:16s} mean {row['mean']:6.2f}  {wall:6.1f} s",
+          flush=True)
+    return row
 
 
 def finished_clouds(path: Path, settings: dict) -> dict[tuple, list[dict]]:
@@ -186,13 +238,14 @@ def with_best_pca(table: pd.DataFrame) -> tuple[pd.DataFrame, dict[str, int]]:
 
 
 def verdicts(table: pd.DataFrame) -> dict[str, dict[str, object]]:
-    """Per category: Refine-Net's mean error, each rival's, and whether Refine-Net is below all of them."""
-    categories = table_categories(table)
+    """Per category: Refine-Net's mean and RMSE, each rival's (of those in the table), and whether Refine-Net is
+    below all of them in both."""
     out = {}
-    for c in categories:
-        ours, rivals = table.loc["refinenet", (c, "mean")], {r: table.loc[r, (c, "mean")] for r in RIVALS}
-        out[c] = {"refinenet": float(ours), **{r: float(v) for r, v in rivals.items()},
-                  "met": bool(all(ours < v for v in rivals.values()))}
+    for c in table_categories(table):
+        ours = {m: float(table.loc["refinenet", (c, m)]) for m in ("mean", "rmse")}
+        rivals = {r: {m: float(table.loc[r, (c, m)]) for m in ("mean", "rmse")} for r in RIVALS if r in table.index}
+        out[c] = {"refinenet": ours, **rivals,
+                  "met": all(ours[m] < v[m] for v in rivals.values() for m in ("mean", "rmse"))}
     return out
 
 
@@ -216,8 +269,10 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         "",
         f"Requirement: {record['requirement']}",
         "",
-        f"**Refine-Net below PCA (best k), Jet and MFPS in {len(met)} of {len(per_category)} categories"
-        + (f" ({', '.join(met)})" if met else "") + ".** " + record["mfps_verdict"],
+        f"**Refine-Net below {', '.join(NAMES[r] for r in record['rivals'])} in mean and RMSE in {len(met)} of "
+        f"{len(per_category)} categories" + (f" ({', '.join(met)})" if met else "") + ".** " + record["mfps_verdict"]
+        + (f" Not run: {'; '.join(f'{NAMES[m]} ({why})' for m, why in record['not_run'].items())}."
+           if record["not_run"] else ""),
         "",
         f"Every mesh of `../shared/data/meshes/dev` is sampled with {record['points']:,} area-uniform points "
         "(ground truth: face normals) and perturbed with Gaussian noise in percent of the bounding-box diagonal: "
@@ -253,9 +308,24 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
     near = record["sharp_near_edges"]
     lines += [
         "",
-        "Mean error per category, Refine-Net against the best of the others: "
-        + "; ".join(f"{c} {v['refinenet']:.2f} against " + ", ".join(f"{NAMES[r]} {v[r]:.2f}" for r in RIVALS)
+        "Mean / RMSE per category, Refine-Net against the others: "
+        + "; ".join(f"{c} {_pair(v['refinenet'])} against "
+                    + ", ".join(f"{NAMES[r]} {_pair(v[r])}" for r in record["rivals"])
                     + (" (met)" if v["met"] else " (**not met**)") for c, v in per_category.items()) + ".",
+        "",
+        "## Per noise level",
+        "",
+        "Mean error in degrees pooled over the clouds of each category and noise level (percent of the diagonal); "
+        f"the plot is `{STEM}.png`.",
+        "",
+        *markdown_table(per_level(per_cloud).rename(columns=NAMES), {NAMES[m]: ".2f" for m in METHODS}),
+        "",
+        "## Time",
+        "",
+        "Wall seconds per 100,000 points, summed over every cloud of the run (each method on the threads it was "
+        f"given: ours and PCA, Jet and MFPS on {info['threads']}, the CGAL and DISNE peers on one, each a whole "
+        "process with its start-up): "
+        + ", ".join(f"{NAMES[m]} {v:.1f}" for m, v in seconds_per_100k(per_cloud).items()) + ".",
         "",
         f"SharpFeature near edges ({near['points']:,} of {near['total_points']:,} points, "
         f"{near['points'] / near['total_points']:.1%}), pooled mean error: "
@@ -288,6 +358,60 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         "",
     ]
     return "\n".join(lines)
+
+
+def absent(method: str, methods: list[str], reuse: Path, disne: Path | None) -> str:
+    """Why a peer has no rows: not installed, or neither run nor in the reused record."""
+    missing = disne_missing(disne) if method == "disne" else cgal_missing()
+    if method in methods and missing:
+        return missing
+    return f"not asked for (--methods) and not in {reuse.name}"
+
+
+def _pair(v: dict[str, float]) -> str:
+    return f"{v['mean']:.2f} / {v['rmse']:.2f}"
+
+
+def per_level(per_cloud: pd.DataFrame) -> pd.DataFrame:
+    """Pooled mean error per (category, noise) and method, methods in METHODS' order."""
+    sums = per_cloud.groupby(["category", "noise", "method"], sort=False)[["sum_deg", "n"]].sum()
+    table = (sums["sum_deg"] / sums["n"]).unstack("method")
+    table = table[[m for m in METHODS if m in table.columns]]
+    table.index = [f"{c} {noise:.2f}" for c, noise in table.index]
+    table.index.name = "category, noise"
+    return table
+
+
+def seconds_per_100k(per_cloud: pd.DataFrame) -> dict[str, float]:
+    """Wall seconds per 100,000 points of each method over the whole run."""
+    sums = per_cloud.groupby("method")[["seconds", "n"]].sum()
+    return {m: float(1e5 * sums.loc[m, "seconds"] / sums.loc[m, "n"]) for m in METHODS if m in sums.index}
+
+
+def noise_plot(per_cloud: pd.DataFrame, best_k: dict[str, int], footer: str, path: Path) -> None:
+    """Mean error against the noise level per method, one panel per category (PCA at the category's best k)."""
+    levels = per_level(per_cloud)
+    categories = list(dict.fromkeys(per_cloud["category"]))
+    fig, axes = plt.subplots(1, len(categories), figsize=(3.2 * len(categories), 3.2), dpi=120, squeeze=False)
+    for ax, category in zip(axes[0], categories, strict=True):
+        rows = levels[levels.index.str.startswith(category + " ")]
+        noise = [float(label.split()[-1]) for label in rows.index]
+        for method in PLOTTED:
+            column = f"pca{best_k[category]}" if method == PCA_BEST else method
+            if column in rows.columns:
+                ax.plot(noise, rows[column], marker="o", ms=3, label=NAMES[method],
+                        lw=2.2 if method == "refinenet" else 1.2)
+        ax.set_title(category, fontsize=9)
+        ax.set_xlabel("noise (% of the diagonal)", fontsize=8)
+        ax.set_xticks(noise)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("mean error (deg)", fontsize=8)
+    axes[0][-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1))
+    fig.text(0.01, 0.01, footer, fontsize=6, color="0.35")
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", metadata={"Software": None})
+    plt.close(fig)
 
 
 def reused_rows(path: Path, methods: list[str], n_points: int) -> pd.DataFrame:
@@ -329,7 +453,15 @@ def main() -> None:
                              "clouds: checked by their seeds and sizes)")
     parser.add_argument("--release", type=Path, default=SHIPPED,
                         help="a release folder to evaluate in place of the shipped networks")
+    parser.add_argument("--disne", type=Path, help="a DISNE folder made by ../shared/peers/disne/prepare.sh")
+    parser.add_argument("--report", action="store_true",
+                        help="compute nothing: rebuild the report and plot under --out from its dev_meshes.json")
     args = parser.parse_args()
+    if args.report:
+        record = json.loads((args.out / f"{STEM}.json").read_text())
+        report(args.out, record | {"not_run": {m: "not in this run" for m in PEER_METHODS
+                                               if m not in {r["method"] for r in record["per_cloud"]}}})
+        return
     if args.release.resolve() != SHIPPED and args.out.resolve() == RESULTS.resolve():
         sys.exit(f"eval_dev_meshes: --release {args.release}: give --out a folder outside {RESULTS} (it holds the "
                  "shipped networks' evaluation only)")
@@ -349,30 +481,24 @@ def main() -> None:
         resumed += cloud in finished
         if cloud not in finished:
             finished[cloud] = evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
-                                             tuple(args.methods))
+                                             tuple(args.methods), args.disne)
             keep_finished(partial, settings, cloud, finished[cloud])
         rows += finished[cloud]
     per_cloud = in_run_order(pd.DataFrame(rows), kept)
-    if len(per_cloud) != len(test_clouds) * len(METHODS):
-        raise SystemExit(f"{args.reuse}: its rows do not cover every cloud of the methods not run")
-    category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
-    sharp = category_table[("SharpFeature", "mean")]
-    mfps_met = bool(sharp["mfps"] < sharp[PCA_BEST] and sharp["mfps"] < sharp["jet"])
-    sharp_rows = per_cloud[(per_cloud["category"] == "SharpFeature") & (per_cloud["method"] == "mfps")]
+    counts = per_cloud["method"].value_counts()
+    short = [m for m in METHODS if counts.get(m, 0) not in (0, len(test_clouds))
+             or (counts.get(m, 0) == 0 and m not in PEER_METHODS)]
+    if short:
+        raise SystemExit(f"eval_dev_meshes: no rows for every cloud of {', '.join(short)} (neither run nor in "
+                         f"{args.reuse})")
+    not_run = {m: absent(m, args.methods, args.reuse, args.disne) for m in PEER_METHODS if m not in counts}
     record = {
         "requirement": " ".join(__doc__.split('"')[1].split()),
-        "verdicts": verdicts(category_table),
-        "mfps_verdict": f"MFPS on SharpFeature: {sharp['mfps']:.2f} against PCA (best k) {sharp[PCA_BEST]:.2f} and "
-                        f"Jet {sharp['jet']:.2f} ({'met' if mfps_met else 'not met'}).",
+        "not_run": not_run,
         "points": args.points, "noise_percent": {c: list(v) for c, v in PARAMS.noise.test.items()},
-        "global_seed": GLOBAL_SEED, "meshes_dir": str(args.meshes.resolve()), "pca_best_k": best_k,
+        "global_seed": GLOBAL_SEED, "meshes_dir": str(args.meshes.resolve()),
         "precision": precision, "methods_run": list(args.methods),
         "reused_from": str(args.reuse) if len(args.methods) < len(METHODS) else None,
-        "per_category": {NAMES[m]: {f"{c}/{k}": float(v) for (c, k), v in row.items()}
-                         for m, row in category_table.iterrows()},
-        "sharp_near_edges": {"points": int(sharp_rows["near_edge_points"].sum()),
-                             "total_points": int(sharp_rows["n"].sum()),
-                             "mean": near_edge_means(per_cloud, "SharpFeature")},
         "per_cloud": json.loads(per_cloud.to_json(orient="records")),
         "release": shipped_networks(release),
         "release_shipped": args.release.resolve() == SHIPPED,
@@ -382,9 +508,36 @@ def main() -> None:
         "wall_s": time.perf_counter() - start,
         "load_average_1min": [load_start, os.getloadavg()[0]],
         "machine": machine(args.threads),
+        "date": datetime.date.today().isoformat(),
     }
-    write_results(args.out, STEM, record, markdown(record, per_cloud, category_table))
+    report(args.out, record)
     partial.unlink()
+
+
+def report(out: Path, record: dict) -> None:
+    """dev_meshes.json, .md and .png under `out`, from a record's per-cloud rows: the tables, the verdicts and the
+    plot are derived here, so that `--report` rebuilds them from a run's record."""
+    per_cloud = pd.DataFrame(record["per_cloud"])
+    category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
+    sharp = category_table[("SharpFeature", "mean")]
+    mfps_met = bool(sharp["mfps"] < sharp[PCA_BEST] and sharp["mfps"] < sharp["jet"])
+    sharp_rows = per_cloud[(per_cloud["category"] == "SharpFeature") & (per_cloud["method"] == "mfps")]
+    record |= {
+        "verdicts": verdicts(category_table),
+        "rivals": [r for r in RIVALS if r in category_table.index],
+        "mfps_verdict": f"MFPS on SharpFeature: {sharp['mfps']:.2f} against PCA (best k) {sharp[PCA_BEST]:.2f} and "
+                        f"Jet {sharp['jet']:.2f} ({'met' if mfps_met else 'not met'}).",
+        "pca_best_k": best_k,
+        "per_category": {NAMES[m]: {f"{c}/{k}": float(v) for (c, k), v in row.items()}
+                         for m, row in category_table.iterrows()},
+        "sharp_near_edges": {"points": int(sharp_rows["near_edge_points"].sum()),
+                             "total_points": int(sharp_rows["n"].sum()),
+                             "mean": near_edge_means(per_cloud, "SharpFeature")},
+    }
+    write_results(out, STEM, record, markdown(record, per_cloud, category_table))
+    noise_plot(per_cloud, best_k, f"{STEM}: {record['points']:,} points per cloud, networks "
+               f"{record['release']['fingerprint']}, {record['machine']['cpu']}"
+               + (f", {record['date']}" if "date" in record else ""), out / f"{STEM}.png")
     print(to_csv_frame(category_table, NAMES).round(3).to_string())
 
 

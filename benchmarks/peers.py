@@ -7,12 +7,15 @@ that their times compare with those of `refinenet normals`:
 * DISNE (Lenssen et al. 2020, learned, trained on PCPNet), from a folder prepared by
   `../shared/peers/disne/prepare.sh MIRROR DEST`, on the number of threads asked.
 
-A peer that is not installed is skipped, with the reason. Every peer's normals are unoriented.
+A peer that is not installed is skipped, with the reason. Every peer's normals are unoriented. `timed_process`
+times any whole command (ours too) from outside: wall and CPU seconds and peak memory.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -118,3 +121,18 @@ def peers(cloud_ply: Path, cloud_xyz: Path, diagonal: float, folder: Path, disne
     else:
         skipped["disne"] = reason
     return runs, skipped
+
+
+def timed_process(command: list[str], env: dict[str, str] | None = None) -> dict[str, float]:
+    """Wall seconds, CPU seconds and peak resident memory (GB) of a whole process, from /usr/bin/time -v, and the
+    strata `refinenet normals` says it used (1 when it names none)."""
+    run = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True, text=True, env=env)
+    if run.returncode != 0:
+        raise RuntimeError(f"failed: {' '.join(command)[:300]}\n{run.stderr[-2000:]}")
+    report = dict(line.strip().split(": ", 1) for line in run.stderr.splitlines() if ": " in line)
+    clock = [float(x) for x in re.split("[:]", report["Elapsed (wall clock) time (h:mm:ss or m:ss)"])]
+    wall = sum(x * 60 ** i for i, x in enumerate(reversed(clock)))
+    strata = re.search(r"(\d+) strata", run.stderr)
+    return {"wall_s": wall, "cpu_s": float(report["User time (seconds)"]) + float(report["System time (seconds)"]),
+            "peak_gb": int(report["Maximum resident set size (kbytes)"]) / 2**20,
+            "strata": int(strata.group(1)) if strata else 1}
