@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 import torch
 from machine import machine_info
-from peers import PEERS, peers, timed_process
+from peers import PEERS, cloud_files, peers, timed_process
 from torch.utils.flop_counter import FlopCounterMode
 
 from refinenet.atomic import write_text
 from refinenet.cli.estimate import estimate_normals
-from refinenet.data.io import read_cloud, write_ply
+from refinenet.data.io import read_cloud
 from refinenet.data.noise import add_gaussian_noise, bbox_diagonal
 from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
@@ -95,9 +95,7 @@ def case(n: int, threads: int, folder: Path, float32: bool, disne: Path | None, 
          chosen: Sequence[str] | None = None) -> dict:
     """One cloud size: ours, then the peers (those named in `chosen`, or all)."""
     points, truth = noisy_cloud(n)
-    source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
-    write_ply(source, points)
-    np.savetxt(xyz, points, fmt="%.9g")
+    source, xyz = cloud_files(points, folder)
     precision = resolve_precision("auto", torch.device("cpu"))
     dtype = torch.bfloat16 if precision == "bfloat16" else torch.float32
     result = {"points": n, "shape": SHAPE, "noise_percent": NOISE, "threads": threads,

@@ -64,12 +64,11 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from bench_mfps import machine, near_edges  # noqa: E402
 from machine import shipped_networks, write_results  # noqa: E402
-from peers import PEERS, cgal_missing, disne_missing, peers, timed_process  # noqa: E402
+from peers import PEERS, cgal_missing, cloud_files, disne_missing, peers, timed_process  # noqa: E402
 
 from refinenet import config as params_lib  # noqa: E402
 from refinenet.atomic import atomic_path  # noqa: E402
 from refinenet.cli.estimate import estimate_normals  # noqa: E402
-from refinenet.data.io import write_ply  # noqa: E402
 from refinenet.data.meshes import MESH_SUFFIXES, read_mesh, sample_mesh  # noqa: E402
 from refinenet.data.noise import add_gaussian_noise, bbox_diagonal, derive_seed  # noqa: E402
 from refinenet.estimators.baselines import jet_normals, pca_normals  # noqa: E402
@@ -170,12 +169,9 @@ def evaluate_cloud(category: str, key: str, path: Path, noise: float, n_points: 
 
 def peer_methods(points: np.ndarray, folder: Path, disne: Path | None,
                  chosen: list[str]) -> dict[str, Callable[[], tuple[np.ndarray, float, float]]]:
-    """The installed peers of `chosen` on the cloud (written to `folder` as binary .ply and .xyz), each a call that
+    """The installed peers of `chosen` on the cloud (written to `folder` by `cloud_files`), each a call that
     gives its normals and the wall and CPU seconds of its whole process."""
-    source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
-    write_ply(source, points)
-    np.savetxt(xyz, points, fmt="%.9g")
-    runs, _ = peers(source, xyz, bbox_diagonal(points), folder, disne)
+    runs, _ = peers(*cloud_files(points, folder), bbox_diagonal(points), folder, disne)
 
     def run(peer) -> tuple[np.ndarray, float, float]:
         timing = timed_process(peer.command, peer.env)

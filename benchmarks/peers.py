@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from refinenet.data.io import read_cloud, read_normals
+from refinenet.data.io import read_cloud, read_normals, write_ply
 
 OPEN3D = """
 import sys, open3d as o3d
@@ -87,6 +87,14 @@ def disne_missing(folder: Path | None) -> str | None:
     if not (folder / "run_peer.py").is_file():
         return f"{folder} has no run_peer.py (prepare it with ../shared/peers/disne/prepare.sh MIRROR {folder})"
     return None
+
+
+def cloud_files(points: np.ndarray, folder: Path) -> tuple[Path, Path]:
+    """The cloud as the peers read it, written under `folder`: binary .ply, and .xyz for CGAL and DISNE."""
+    source, xyz = folder / "cloud.ply", folder / "cloud.xyz"
+    write_ply(source, points)
+    np.savetxt(xyz, points, fmt="%.9g")
+    return source, xyz
 
 
 def peers(cloud_ply: Path, cloud_xyz: Path, diagonal: float, folder: Path, disne: Path | None,

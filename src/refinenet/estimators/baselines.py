@@ -79,7 +79,7 @@ def _fit_jets(points, idx, frames, degree, normals, residuals):
     m, k = idx.shape
     n_coef = (degree + 1) * (degree + 2) // 2
     uvw = np.empty((k, 3))
-    a = np.empty(n_coef)
+    a = np.empty((k, n_coef))
     ata = np.empty((n_coef, n_coef))
     atz = np.empty(n_coef)
     for row in range(m):
@@ -97,12 +97,12 @@ def _fit_jets(points, idx, frames, degree, normals, residuals):
         ata[:] = 0.0
         atz[:] = 0.0
         for j in range(k):
-            _monomials(uvw[j, 1] / scale, uvw[j, 2] / scale, degree, a)
+            _monomials(uvw[j, 1] / scale, uvw[j, 2] / scale, degree, a[j])
             z = uvw[j, 0] / scale
             for r in range(n_coef):
-                atz[r] += a[r] * z
+                atz[r] += a[j, r] * z
                 for c in range(n_coef):
-                    ata[r, c] += a[r] * a[c]
+                    ata[r, c] += a[j, r] * a[j, c]
         for r in range(n_coef):
             ata[r, r] += 1e-12
         _solve(ata, atz)
@@ -114,10 +114,9 @@ def _fit_jets(points, idx, frames, degree, normals, residuals):
         normals[row, 0], normals[row, 1], normals[row, 2] = w0 / length, w1 / length, w2 / length
         squares = 0.0
         for j in range(k):
-            _monomials(uvw[j, 1] / scale, uvw[j, 2] / scale, degree, a)
             height = uvw[j, 0] / scale
             for c in range(n_coef):
-                height -= a[c] * coef[c]
+                height -= a[j, c] * coef[c]
             squares += height * height
         residuals[row] = scale * np.sqrt(squares / max(k - n_coef, 1))
 
