@@ -188,13 +188,15 @@ def stage_table(c: dict) -> list[str]:
     network = stages.get("network")
     lines = [f"### {c['points']:,} points ({c['machine']['cpu']}, {c['date']}, {c['precision']})", "",
              "| stage | wall (s) | CPU (s) | calls | share of the wall time |", "|---|---|---|---|---|", *rows, ""]
-    if network:
+    if network:  # the batches run beside the patches of the next ones, so the networks had both stages' time
         gflop = c["points"] * c["network_flops_per_point"] / 1e9
         rate = max(c["machine"]["gemm_gflops_start"], c["gemm_gflops_end"])
+        span = network["wall_s"] + stages.get("patches", {"wall_s": 0.0})["wall_s"]
         lines += [f"The networks: {c['network_flops_per_point'] / 1e6:.1f} MFLOP per point, {gflop:,.0f} GFLOP in "
-                  f"{network['wall_s']:.1f} s, i.e. {gflop / network['wall_s']:.0f} GFLOP/s against the measured "
-                  f"{c['precision']} GEMM rate of {rate:.0f} GFLOP/s: at {gflop / network['wall_s'] / rate:.0%} "
-                  f"of it (at the GEMM rate they would take {gflop / rate:.1f} s).", ""]
+                  f"the {span:.1f} s of the patches and network stages (they overlap), i.e. at least "
+                  f"{gflop / span:.0f} GFLOP/s against the measured {c['precision']} GEMM rate of {rate:.0f} "
+                  f"GFLOP/s: at {gflop / span / rate:.0%} of it or more (at the GEMM rate they would take "
+                  f"{gflop / rate:.1f} s).", ""]
     return lines
 
 

@@ -6,11 +6,14 @@ are never materialised for the whole cloud). The same code runs on CPU and CUDA.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import torch
+from torch import Tensor
 from tqdm import tqdm
 
 from refinenet.config import InferenceConfig, PatchConfig
@@ -23,6 +26,7 @@ from refinenet.network.devices import resolve_device, resolve_precision
 from refinenet.network.model import NetworkConfig, RefineNet, for_inference
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
 from refinenet.profiling import stage
+from refinenet.threads import native_threads
 
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,
@@ -33,7 +37,7 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
     Each point goes through the network of its cluster (`networks` maps cluster id -> network, which is moved to
     `device` and put in eval mode); a cluster without a network (trained as empty) keeps the first normal of nf.
     `patch` must match the training patches; `seed` draws the ball-mode subsets. `length` is the l_d of ball
-    patches (`dataset.PreparedCloud`).
+    patches (`dataset.PreparedCloud`). On a CPU the batches run side by side, one per thread (`_BatchRunner`).
     """
     device, batch_size = resolve_device(config.device), config.batch_size
     if batch_size < 1:
@@ -46,20 +50,71 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
     normals = features.n_first.astype(np.float32)
     rng = np.random.default_rng(seed)
     members = {c: np.flatnonzero(cloud.clusters == c) for c in sorted(networks)}
+    batches = [(c, index[start:start + batch_size]) for c, index in members.items()
+               for start in range(0, len(index), batch_size)]
+    nets = {c: networks[c].to(device).eval() for c in members}
     bar = tqdm(total=sum(len(index) for index in members.values()), desc="refining normals", unit="pt",
                disable=not progress)
-    with bar, torch.inference_mode():
-        for c, index in members.items():
-            net = networks[c].to(device).eval()
-            for start in range(0, len(index), batch_size):
-                batch = index[start:start + batch_size]
-                with stage("patches"):
-                    inputs = make_inputs(cloud, batch, patch, net.config, rng).tensors(device)
-                with stage("network"):
-                    local = net(*inputs).float().cpu().numpy()
-                normals[batch] = to_world(features.frames[batch], local)
-                bar.update(len(batch))
+
+    def put(batch: np.ndarray, local: np.ndarray) -> None:
+        normals[batch] = to_world(features.frames[batch], local)
+        bar.update(len(batch))
+
+    threads = native_threads() if device.type == "cpu" else 1
+    with bar, _BatchRunner(min(threads, len(batches)), put) as runner:
+        for c, batch in batches:  # the inputs in order, so that `rng` draws the same subsets at any thread count
+            with stage("patches"):
+                inputs = make_inputs(cloud, batch, patch, nets[c].config, rng).tensors(device)
+            runner.submit(nets[c], inputs, batch)
     return normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+class _BatchRunner:
+    """Runs the networks on batches, each on one thread, `threads` at a time, and hands each result to `put` in
+    the order submitted. A batch of a few thousand patches is too small for two threads to share well (each
+    product waits for the slower thread): side by side on one thread each they take less time, and the patches
+    of the next batch are made meanwhile. One-thread products equal those of any thread count, bit for bit
+    (`MKL_CBWR`, set in `refinenet`), so the normals do not depend on `threads`. With one thread (a GPU, or a
+    job given one) each batch runs at once, with the process's torch threads."""
+
+    def __init__(self, threads: int, put: Callable[[np.ndarray, np.ndarray], None]) -> None:
+        self.threads, self.put = threads, put
+        self.pool = ThreadPoolExecutor(threads, initializer=torch.set_num_threads, initargs=(1,)) \
+            if threads > 1 else None
+        self.pending: deque[tuple[np.ndarray, Future]] = deque()
+
+    def submit(self, net: RefineNet, inputs: tuple[Tensor | None, ...], batch: np.ndarray) -> None:
+        if self.pool is None:
+            with stage("network"):
+                local = _forward(net, inputs)
+            self.put(batch, local)
+            return
+        self.pending.append((batch, self.pool.submit(_forward, net, inputs)))
+        if len(self.pending) > self.threads:
+            self._collect()
+
+    def _collect(self) -> None:
+        batch, future = self.pending.popleft()
+        with stage("network"):  # the wait beyond the time spent making patches meanwhile
+            local = future.result()
+        self.put(batch, local)
+
+    def __enter__(self) -> _BatchRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            while self.pending and exc[0] is None:
+                self._collect()
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown(cancel_futures=True)
+
+
+def _forward(net: RefineNet, inputs: tuple[Tensor | None, ...]) -> np.ndarray:
+    """The local normals of one batch (inference mode is per thread, so it is entered here)."""
+    with torch.inference_mode():
+        return net(*inputs).float().cpu().numpy()
 
 
 def load_networks(folders: Sequence[str | Path], network: NetworkConfig, device: str,
