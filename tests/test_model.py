@@ -10,6 +10,7 @@ import torch
 from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
+    LinearReLU,
     NetworkConfig,
     RefineNet,
     RotationMatrix,
@@ -336,6 +337,23 @@ def test_the_inference_layout_computes_what_the_training_layout_does(connection,
     assert model.point_module.chunk == 64 and model.height_map_module.memory_format == torch.channels_last
     assert model.branches_at_once == at_once
     torch.testing.assert_close(laid_out, reference, rtol=0, atol=1e-5)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_a_fused_linear_relu_is_bitwise_the_two_layers(dtype):
+    """`LinearReLU` on channels-last points, inside and outside inference mode, and in a BN-folded network, where it
+    takes the place of every ReLU of the point MLP."""
+    torch.manual_seed(0)
+    linear = torch.nn.Linear(64, 128).to(dtype)
+    x = torch.randn(32, 100, 64, dtype=dtype)
+    fused = LinearReLU.of(linear)
+    with torch.inference_mode():
+        expected = torch.relu(linear(x))
+        assert torch.equal(fused(x), expected) and (expected == 0).any()
+    assert torch.equal(fused(x).detach(), expected)  # the autograd path
+    mlp = for_inference(RefineNet(preset("release")), True, "float32").point_module.mlp
+    assert sum(isinstance(layer, LinearReLU) for layer in mlp) == 4
+    assert not any(isinstance(layer, torch.nn.ReLU) for layer in mlp) and type(mlp[-2]) is torch.nn.Linear
 
 
 @pytest.mark.parametrize("fuse, precision", [(True, "bfloat16"), (True, "float32"), (False, "bfloat16")])
