@@ -220,6 +220,17 @@ def test_max_pool_linear_bn_of_a_folded_layer_is_the_max_pool_of_the_linear():
         torch.testing.assert_close(fast, _plain_pooling(x, linear, bn), rtol=1e-9, atol=1e-10)
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
+def test_max_pool_linear_bn_without_gradients_is_bitwise_the_max_of_the_products(dtype):
+    """The inference path's max over the points (a pooling kernel in bfloat16, amax in float32), the bias added
+    after it."""
+    linear = torch.nn.Linear(16, 64).to(dtype)
+    x = torch.randn(5, 300, 16, generator=torch.Generator().manual_seed(3)).to(dtype)
+    with torch.inference_mode():
+        expected = torch.nn.functional.linear(x, linear.weight).amax(dim=1) + linear.bias
+        assert torch.equal(max_pool_linear_bn(x, linear, torch.nn.Identity()), expected)
+
+
 def test_weight_matrix_connection_computes_th_tp_v():
     torch.manual_seed(0)
     model = RefineNet(preset("release")).eval()

@@ -76,7 +76,7 @@ def max_pool_linear_bn(x: Tensor, linear: nn.Linear, bn: nn.BatchNorm1d | nn.Ide
             values, index = torch.matmul(signed, x.transpose(1, 2)).max(dim=2)
             rows = (index + torch.arange(batch, device=x.device).unsqueeze(1) * points).t().contiguous()
         else:  # the max alone: products (B, P, C), the faster layout for the matrix product (bfloat16's above all)
-            values, rows = F.linear(x, signed).amax(dim=1), None
+            values, rows = _max_over_points(F.linear(x, signed)), None
         values = values * sign
     if rows is not None:
         values = _SelectedProducts.apply(flat, weight, rows, values.t().contiguous()).t()
@@ -84,6 +84,14 @@ def max_pool_linear_bn(x: Tensor, linear: nn.Linear, bn: nn.BatchNorm1d | nn.Ide
     if center is None:
         return y
     return (y - center) * scale + shift
+
+
+def _max_over_points(products: Tensor) -> Tensor:
+    """The max over dim 1 of (B, P, C) products. In bfloat16 torch's pooling kernel takes half the time of its amax
+    on CPU (a quarter at P = 300), with the same values; in float32 amax is the faster."""
+    if products.dtype == torch.bfloat16:
+        return F.adaptive_max_pool1d(products.transpose(1, 2), 1).squeeze(2)
+    return products.amax(dim=1)
 
 
 def _batch_statistics(x: Tensor, weight: Tensor, bias: Tensor) -> tuple[Tensor, Tensor]:
