@@ -88,8 +88,9 @@ def bin_axes(normals: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def _grid_axes(normals: np.ndarray, frames: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per grid (point, normal): the axes (n x X x 5 x 3) that map an offset d to (a, b, alpha, beta, zeta) in
-    cells, i.e. its projections on u, v, the dual basis of (u, v) and n_f, and cos (n x X) = u . v.
+    """Per point: the axes (n x 15 x X, i.e. 5 x 3 x X) that map an offset d to (a, b, alpha, beta, zeta) in cells on each of
+    its X grids, i.e. its projections on u, v, the dual basis of (u, v) and n_f, and cos (n x X) = u . v. The
+    grids are the last axis, so that the kernel projects a candidate on all X at once in vector instructions.
 
     The dual basis (lattice coordinates) is only needed, and only well defined, on the regular grids.
     """
@@ -98,7 +99,7 @@ def _grid_axes(normals: np.ndarray, frames: np.ndarray, cell: np.ndarray) -> tup
     inverse = np.divide(1.0, 1.0 - cos ** 2, out=np.zeros_like(cos), where=cos ** 2 <= CORNER_SKEW)[..., None]
     dual_u, dual_v = (u - cos[..., None] * v) * inverse, (v - cos[..., None] * u) * inverse
     axes = np.stack([u, v, dual_u, dual_v, normals], axis=2) / cell[:, None, None, None]
-    return np.ascontiguousarray(axes), cos
+    return np.ascontiguousarray(axes.transpose(0, 2, 3, 1)).reshape(len(axes), 15, -1), cos
 
 
 @njit(nogil=True, cache=True)
@@ -110,10 +111,11 @@ def _maps(points, keys, dims, origin, grid_cell, centres, reach, inverse_cell2, 
     sum_w = np.empty((n_maps, m, m))
     sum_wz = np.empty((n_maps, m, m))
     low, high = np.empty(3, np.int64), np.empty(3, np.int64)
+    projections = np.empty((5, n_maps))
     for row in range(len(centres)):
         sum_w[:] = 0.0
         sum_wz[:] = 0.0
-        p = points[centres[row]]
+        p, t = points[centres[row]], axes[row]
         r = reach[row]
         for a in range(3):
             low[a] = max(int((p[a] - r - origin[a]) / grid_cell), 0)
@@ -128,8 +130,10 @@ def _maps(points, keys, dims, origin, grid_cell, centres, reach, inverse_cell2, 
                     dist2 = d0 * d0 + d1 * d1 + d2 * d2
                     if dist2 > r * r:
                         continue
-                    _vote(d0, d1, d2, dist2 * inverse_cell2[row], axes[row], cos[row], skewed[row], half,
-                          sum_w, sum_wz)
+                    for s in range(5):
+                        for x in range(n_maps):
+                            projections[s, x] = d0 * t[3 * s, x] + d1 * t[3 * s + 1, x] + d2 * t[3 * s + 2, x]
+                    _vote(projections, dist2 * inverse_cell2[row], cos[row], skewed[row], half, sum_w, sum_wz)
         for x in range(n_maps):
             for b0 in range(m):
                 for b1 in range(m):
@@ -138,22 +142,19 @@ def _maps(points, keys, dims, origin, grid_cell, centres, reach, inverse_cell2, 
 
 
 @njit(nogil=True, cache=True)
-def _vote(d0, d1, d2, q, axes, cos, skewed, half, sum_w, sum_wz):
-    """Add one candidate (offset d, squared length q in cells) to the bins of every grid whose ball holds it:
-    the 4 corners of its lattice cell on a regular grid, every bin on a skewed one. Distances use
-    |d - r u - c v|^2 = q - 2 r a - 2 c b + r^2 + c^2 + 2 r c cos, in cells."""
+def _vote(projections, q, cos, skewed, half, sum_w, sum_wz):
+    """Add one candidate (its (a, b, alpha, beta, zeta) on every grid, its squared length q, in cells) to the bins
+    of every grid whose ball holds it: the 4 corners of its lattice cell on a regular grid, every bin on a skewed
+    one. Distances use |d - r u - c v|^2 = q - 2 r a - 2 c b + r^2 + c^2 + 2 r c cos, in cells."""
     for x in range(len(cos)):
-        t = axes[x]
-        zeta = d0 * t[4, 0] + d1 * t[4, 1] + d2 * t[4, 2]
+        zeta = projections[4, x]
         if zeta * zeta > BIN_RADIUS ** 2:
             continue
-        a = d0 * t[0, 0] + d1 * t[0, 1] + d2 * t[0, 2]
-        b = d0 * t[1, 0] + d1 * t[1, 1] + d2 * t[1, 2]
+        a, b = projections[0, x], projections[1, x]
         if skewed[x]:
             r0, c0, span = -half, -half, 2 * half + 1
         else:
-            alpha = d0 * t[2, 0] + d1 * t[2, 1] + d2 * t[2, 2]
-            beta = d0 * t[3, 0] + d1 * t[3, 1] + d2 * t[3, 2]
+            alpha, beta = projections[2, x], projections[3, x]
             if abs(alpha) >= half + 1 or abs(beta) >= half + 1:
                 continue
             r0, c0, span = int(np.floor(alpha)), int(np.floor(beta)), 2
