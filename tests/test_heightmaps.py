@@ -29,6 +29,13 @@ def _tilted_lattice(theta: float, about_x: bool, h: float, q: int = 8) -> np.nda
     return slope[:, [1, 0, 2]] if about_x else slope
 
 
+def test_no_points_give_no_maps():
+    points = _tilted_lattice(0.0, False, 0.1)
+    frames = np.broadcast_to(np.eye(3), (len(points), 3, 3))
+    nf = np.tile([0.0, 0.0, 1.0, 1.0, 0.0, 0.0], (len(points), 1))
+    assert height_maps(points, nf, frames, index=np.array([], dtype=np.int64)).shape == (0, 2, 7, 7)
+
+
 @pytest.mark.parametrize("about_x", [False, True])
 def test_tilted_plane_matches_the_analytic_heights(about_x):
     """A plane tilted by theta against n_f = e3: the ball of bin b meets it in a disc around the foot of b, so the

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
+from unittest import mock
 
 import pytest
 import torch
+from torch.utils.flop_counter import FlopCounterMode
 
 from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
+    FUSED_RELU_DTYPES,
+    PRECISIONS,
     LinearReLU,
     NetworkConfig,
     RefineNet,
@@ -350,21 +355,33 @@ def test_the_inference_layout_computes_what_the_training_layout_does(connection,
     torch.testing.assert_close(laid_out, reference, rtol=0, atol=1e-5)
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.bfloat16])
-def test_a_fused_linear_relu_is_bitwise_the_two_layers(dtype):
-    """`LinearReLU` on channels-last points, inside and outside inference mode, and in a BN-folded network, where it
-    takes the place of every ReLU of the point MLP."""
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_the_fused_relus_give_the_network_of_the_two_layers_bit_for_bit(precision):
+    """`LinearReLU` takes the place of every ReLU of a BN-folded point MLP (the 3 -> 64 layer included), runs
+    oneDNN's fused op where the CPU has it, and the network's outputs equal those of Linear then ReLU exactly."""
+    dtype = PRECISIONS[precision]
+    if dtype not in FUSED_RELU_DTYPES:
+        pytest.skip(f"oneDNN's fused linear does not take {precision} on this CPU")
     torch.manual_seed(0)
-    linear = torch.nn.Linear(64, 128).to(dtype)
-    x = torch.randn(32, 100, 64, dtype=dtype)
-    fused = LinearReLU.of(linear)
+    model = RefineNet(preset("release"))
+    for seed in range(3):  # non-trivial BN statistics
+        model(*_inputs(model.config, 16, seed=seed))
+    model.eval()
+    with mock.patch("refinenet.network.model._fuse_relus"):
+        two_layers = for_inference(copy.deepcopy(model), True, precision)
+    fused = for_inference(model, True, precision)
+    mlp = fused.point_module.mlp
+    assert sum(isinstance(layer, LinearReLU) for layer in mlp) == 4 and type(mlp[-2]) is torch.nn.Linear
+    assert not any(isinstance(layer, torch.nn.ReLU) for layer in mlp)
+    inputs = _inputs(model.config, 150)
+    counter = FlopCounterMode(display=False, custom_mapping={torch.ops.mkldnn._linear_pointwise: lambda *a, **k: 1})
     with torch.inference_mode():
-        expected = torch.relu(linear(x))
-        assert torch.equal(fused(x), expected) and (expected == 0).any()
-    assert torch.equal(fused(x).detach(), expected)  # the autograd path
-    mlp = for_inference(RefineNet(preset("release")), True, "float32").point_module.mlp
-    assert sum(isinstance(layer, LinearReLU) for layer in mlp) == 4
-    assert not any(isinstance(layer, torch.nn.ReLU) for layer in mlp) and type(mlp[-2]) is torch.nn.Linear
+        expected = two_layers(*inputs)
+        with counter:
+            got = fused(*inputs)
+    assert counter.get_flop_counts()["Global"][torch.ops.mkldnn._linear_pointwise] == 4 * 3  # 4 layers, 3 chunks
+    assert torch.equal(got, expected)
+    assert torch.equal(fused(*inputs).detach(), expected)  # with gradients enabled: the two layers themselves
 
 
 @pytest.mark.parametrize("fuse, precision", [(True, "bfloat16"), (True, "float32"), (False, "bfloat16")])

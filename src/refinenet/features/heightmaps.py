@@ -58,7 +58,8 @@ def height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, m: int =
         rho = np.broadcast_to(np.asarray(extent, dtype=np.float64), (len(index),))
     half = m // 2
     cell = rho / half
-    normals = np.asarray(nf)[index].astype(np.float64).reshape(len(index), -1, 3)
+    nf = np.asarray(nf)
+    normals = nf[index].astype(np.float64).reshape(len(index), nf.shape[1] // 3, 3)
     normals /= np.linalg.norm(normals, axis=2, keepdims=True)
     axes, cos = _grid_axes(normals, np.asarray(frames)[index].astype(np.float64), cell)
     reach = rho * np.sqrt(2.0 + 2.0 * np.abs(cos).max(axis=1)) + BIN_RADIUS * cell  # farthest bin + its ball
@@ -88,9 +89,10 @@ def bin_axes(normals: np.ndarray, frames: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def _grid_axes(normals: np.ndarray, frames: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per point: the axes (n x 15 x X, i.e. 5 x 3 x X) that map an offset d to (a, b, alpha, beta, zeta) in cells on each of
-    its X grids, i.e. its projections on u, v, the dual basis of (u, v) and n_f, and cos (n x X) = u . v. The
-    grids are the last axis, so that the kernel projects a candidate on all X at once in vector instructions.
+    """Per point: the axes (n x 15 x X, i.e. 5 x 3 x X) that map an offset d to (a, b, alpha, beta, zeta) in cells
+    on each of its X grids, i.e. its projections on u, v, the dual basis of (u, v) and n_f, and cos (n x X) =
+    u . v. The grids are the last axis, so that the kernel projects a candidate on all X at once in vector
+    instructions.
 
     The dual basis (lattice coordinates) is only needed, and only well defined, on the regular grids.
     """
@@ -99,7 +101,7 @@ def _grid_axes(normals: np.ndarray, frames: np.ndarray, cell: np.ndarray) -> tup
     inverse = np.divide(1.0, 1.0 - cos ** 2, out=np.zeros_like(cos), where=cos ** 2 <= CORNER_SKEW)[..., None]
     dual_u, dual_v = (u - cos[..., None] * v) * inverse, (v - cos[..., None] * u) * inverse
     axes = np.stack([u, v, dual_u, dual_v, normals], axis=2) / cell[:, None, None, None]
-    return np.ascontiguousarray(axes.transpose(0, 2, 3, 1)).reshape(len(axes), 15, -1), cos
+    return np.ascontiguousarray(axes.transpose(0, 2, 3, 1)).reshape(len(axes), 15, axes.shape[1]), cos
 
 
 @njit(nogil=True, cache=True)

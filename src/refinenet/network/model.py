@@ -554,12 +554,20 @@ class LinearReLU(nn.Linear):
         return fused
 
     def forward(self, x: Tensor) -> Tensor:
-        if _ONEDNN and x.device.type == "cpu" and not torch.is_grad_enabled():
+        if x.dtype in FUSED_RELU_DTYPES and x.device.type == "cpu" and not torch.is_grad_enabled():
             return torch.ops.mkldnn._linear_pointwise(x, self.weight, self.bias, "relu", [], "")
         return F.relu(super().forward(x))
 
 
-_ONEDNN = torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")
+def _onednn_dtypes() -> tuple[torch.dtype, ...]:
+    """The dtypes oneDNN's fused linear takes here: none without it, bfloat16 only where the CPU has it natively."""
+    if not (torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")):
+        return ()
+    return (torch.float32, torch.bfloat16) if torch.ops.mkldnn._is_mkldnn_bf16_supported() else (torch.float32,)
+
+
+#: The dtypes in which `LinearReLU` runs oneDNN's fused op.
+FUSED_RELU_DTYPES = _onednn_dtypes()
 
 
 def _fuse_relus(mlp: nn.Sequential) -> None:
