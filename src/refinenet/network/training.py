@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import torch
 import torch.nn.functional as F
 from tqdm import tqdm
@@ -275,5 +274,7 @@ def _validate(model: RefineNet, data: ClusterData, network: NetworkConfig, confi
 
 
 def _write_history(path: Path, rows: list[dict[str, Any]]) -> None:
+    import pandas as pd  # here, not at the top: `refinenet normals` imports this module and needs no pandas
+
     with atomic_path(path) as tmp:
         pd.DataFrame(rows, columns=list(HISTORY_COLUMNS)).to_csv(tmp, index=False)
