@@ -250,6 +250,33 @@ def test_placeholder_zero_normals_count_as_absent(tmp_path, cloud):
         read_cloud(tmp_path / "one.npy")
 
 
+@pytest.mark.parametrize("fmt, order", [("binary_little_endian", "<"), ("binary_big_endian", ">")])
+def test_binary_ply_is_read_as_open3d_reads_it(tmp_path, cloud, fmt, order):
+    """Binary PLY vertices are read by numpy, in any byte order and among other properties of any type (here a
+    colour, an int and a double), with the values Open3D gives."""
+    import open3d as o3d
+
+    points, normals = cloud
+    rgb = np.random.default_rng(2).integers(0, 256, size=(len(points), 3))
+    fields = [("red", "u1", rgb[:, 0]), ("x", "f8", points[:, 0]), ("y", "f8", points[:, 1]),
+              ("label", "i4", np.arange(len(points))), ("z", "f8", points[:, 2]), ("nx", "f4", normals[:, 0]),
+              ("ny", "f4", normals[:, 1]), ("nz", "f4", normals[:, 2]), ("green", "u1", rgb[:, 1]),
+              ("blue", "u1", rgb[:, 2])]
+    types = {"u1": "uchar", "i4": "int", "f4": "float", "f8": "double"}
+    rows = np.empty(len(points), dtype=[(name, order + kind) for name, kind, _ in fields])
+    for name, _, values in fields:
+        rows[name] = values
+    header = (f"ply\nformat {fmt} 1.0\ncomment made by a test\nelement vertex {len(points)}\n"
+              + "".join(f"property {types[kind]} {name}\n" for name, kind, _ in fields) + "end_header\n")
+    path = tmp_path / "scan.ply"
+    path.write_bytes(header.encode() + rows.tobytes())
+    back, theirs = read_cloud(path), o3d.io.read_point_cloud(str(path))
+    np.testing.assert_array_equal(back.points, points)
+    np.testing.assert_array_equal(back.points, np.asarray(theirs.points))
+    given = np.asarray(theirs.normals)  # float32 in the file; read_cloud rescales each to unit length
+    np.testing.assert_allclose(back.normals, given / np.linalg.norm(given, axis=1, keepdims=True), rtol=0, atol=1e-15)
+
+
 def test_binary_float64_pcd_is_read_exactly(tmp_path, cloud):
     """As PCL writes it; Open3D's reader would return zeros."""
     points, normals = cloud

@@ -1,7 +1,7 @@
 """Reading and writing point clouds with normals, with validation that names the file and the problem.
 
-Formats: PCPNet text (`NAME.xyz` + optional `NAME.normals`, also 6-column `.xyz`), `.ply` and `.pcd` (read by
-Open3D, binary `.pcd` by numpy; written here), `.npy` (N x 3 or N x 6), and the pipeline's own `.npz` cloud
+Formats: PCPNet text (`NAME.xyz` + optional `NAME.normals`, also 6-column `.xyz`), `.ply` and `.pcd` (binary
+ones by numpy, the rest by Open3D; written here), `.npy` (N x 3 or N x 6), and the pipeline's own `.npz` cloud
 records (points, normals and the metadata that produced them, seed included).
 """
 
@@ -164,7 +164,7 @@ def read_cloud(path: str | Path, min_points: int = 1, sibling_normals: bool = Fa
         elif suffix == ".npz":
             points, normals, meta = _read_npz(path)
         else:
-            points, normals = _read_open3d(path)
+            points, normals = _read_ply_or_pcd(path)
     except OSError as err:
         raise InputError(path, f"cannot be read ({err.strerror or type(err).__name__})") from None
     check_array(path, points, "points", min_points)
@@ -290,9 +290,11 @@ def _header(path: Path, end: bytes) -> list[list[str]]:
     return lines[:ends[0] + 1] if ends else []
 
 
-#: Bytes of each PLY scalar type, and the numpy type of each PCD (TYPE, SIZE).
-PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
-             "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+#: The numpy type of each PLY scalar type (in the file's byte order) and of each PCD (TYPE, SIZE).
+PLY_TYPES = {"char": "i1", "uchar": "u1", "int8": "i1", "uint8": "u1", "short": "i2", "ushort": "u2", "int16": "i2",
+             "uint16": "u2", "int": "i4", "uint": "u4", "int32": "i4", "uint32": "u4", "float": "f4",
+             "float32": "f4", "double": "f8", "float64": "f8"}
+PLY_ORDERS = {"binary_little_endian": "<", "binary_big_endian": ">"}
 PCD_TYPES = {("F", "4"): "<f4", ("F", "8"): "<f8", ("I", "1"): "i1", ("I", "2"): "<i2", ("I", "4"): "<i4",
              ("I", "8"): "<i8", ("U", "1"): "u1", ("U", "2"): "<u2", ("U", "4"): "<u4", ("U", "8"): "<u8"}
 
@@ -313,9 +315,10 @@ def _text_lines(path: Path, start: int) -> int:
         return sum(1 for line in fh if line.strip())
 
 
-def _ply_points(path: Path) -> tuple[int, int | None]:
-    """The point count a PLY header declares and the rows its data holds (None: not countable, as with a face
-    element or a list property), after checking it declares x, y and z."""
+def _ply_points(path: Path) -> tuple[int, int | None, np.dtype | None]:
+    """The point count a PLY header declares, the rows its data holds (None: not countable, as with a face
+    element or a list property) and, for a binary file of vertices alone, the numpy type of a row, after checking
+    it declares x, y and z."""
     header = _header(path, b"end_header")
     if not header or header[0][:1] != ["ply"]:
         raise InputError(path, "not a PLY file (no 'ply' ... 'end_header' header)")
@@ -327,17 +330,20 @@ def _ply_points(path: Path) -> tuple[int, int | None]:
             if element == "vertex":
                 count = int(words[2]) if words[2].isdigit() else -1
         elif words[:1] == ["property"] and element == "vertex":
-            properties.append(words[-1])
-            scalar = scalar and len(words) == 3 and words[1] in PLY_SIZES
-    if count < 0 or not {"x", "y", "z"} <= set(properties):
-        raise InputError(path, f"PLY header declares no vertex element with x, y and z (found {properties})")
+            properties.append((words[-1], words[1]))
+            scalar = scalar and len(words) == 3 and words[1] in PLY_TYPES
+    names = [name for name, _ in properties]
+    if count < 0 or not {"x", "y", "z"} <= set(names):
+        raise InputError(path, f"PLY header declares no vertex element with x, y and z (found {names})")
     if elements != 1 or not scalar:
-        return count, None
+        return count, None, None
     start = _data_start(path, b"end_header")
     if fmt == "ascii":
-        return count, _text_lines(path, start)
-    row_bytes = sum(PLY_SIZES[words[1]] for words in header if words[:1] == ["property"])
-    return count, (path.stat().st_size - start) // row_bytes
+        return count, _text_lines(path, start), None
+    if fmt not in PLY_ORDERS:
+        return count, None, None
+    row = np.dtype([(f"{i}_{name}", PLY_ORDERS[fmt] + PLY_TYPES[kind]) for i, (name, kind) in enumerate(properties)])
+    return count, (path.stat().st_size - start) // row.itemsize, row
 
 
 def _pcd_header(path: Path) -> dict[str, list[str]]:
@@ -370,21 +376,26 @@ def _read_binary_pcd(path: Path, header: dict[str, list[str]]) -> tuple[np.ndarr
     if rows < n:
         raise InputError(path, f"truncated PCD file (header declares {n:,} points, the data holds {rows:,})")
     data = np.fromfile(path, dtype=dtype, count=n, offset=start)
-
-    def columns(names: tuple[str, ...]) -> np.ndarray | None:
-        keys = [f"{fields.index(name)}_{name}" for name in names if name in fields]
-        return np.stack([data[k][:, 0] for k in keys], axis=1).astype(np.float64) if len(keys) == 3 else None
-
-    return columns(("x", "y", "z")), columns(("normal_x", "normal_y", "normal_z"))
+    return _columns(data, fields, ("x", "y", "z")), _columns(data, fields, ("normal_x", "normal_y", "normal_z"))
 
 
-def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """A PLY or PCD point cloud (binary PCD by numpy, the rest by Open3D), checked against its header's count."""
-    import open3d as o3d
+def _columns(data: np.ndarray, fields: list[str], names: tuple[str, ...]) -> np.ndarray | None:
+    """Three named fields of structured rows (each field named `INDEX_NAME`, its first value taken) as an
+    N x 3 float64 array, or None where the rows lack one of them."""
+    keys = [f"{fields.index(name)}_{name}" for name in names if name in fields]
+    if len(keys) != 3:
+        return None
+    return np.stack([data[k].reshape(len(data), -1)[:, 0] for k in keys], axis=1).astype(np.float64)
 
+
+def _read_ply_or_pcd(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """A PLY or PCD point cloud, checked against its header's count. Binary files of points alone are read by
+    numpy (Open3D reads a binary float64 PCD field as zeros, and importing it costs most of a second); the rest,
+    text or with faces, by Open3D."""
     if path.stat().st_size == 0:
         raise InputError(path, "empty point file")
     kind = path.suffix[1:].upper()
+    row = None
     if kind == "PCD":
         header = _pcd_header(path)
         if header.get("DATA", [""])[0] == "binary":
@@ -393,10 +404,21 @@ def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         if header.get("DATA", [""])[0] == "ascii":
             rows = _text_lines(path, _data_start(path, b"DATA"))
     else:
-        expected, rows = _ply_points(path)
+        expected, rows, row = _ply_points(path)
     if rows is not None and rows < expected:
         raise InputError(path, f"truncated {kind} file (header declares {expected:,} points, the data holds "
                                f"{rows:,})")
+    if row is not None:
+        data = np.fromfile(path, dtype=row, count=expected, offset=_data_start(path, b"end_header"))
+        fields = [name.split("_", 1)[1] for name in row.names]
+        return _columns(data, fields, ("x", "y", "z")), _columns(data, fields, ("nx", "ny", "nz"))
+    return _read_open3d(path, kind, expected)
+
+
+def _read_open3d(path: Path, kind: str, expected: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """A text PLY or PCD, or a PLY with faces, by Open3D, which must find the `expected` points."""
+    import open3d as o3d
+
     with native_output_captured() as messages:
         pcd = o3d.io.read_point_cloud(str(path), print_progress=False)
     points = np.asarray(pcd.points, dtype=np.float64)
