@@ -83,8 +83,9 @@ def test_no_grid_where_it_would_not_pay():
 def test_grid_covariances_equal_the_reference(name):
     points = CLOUDS[name]
     tree = cKDTree(points)
-    covs, done = grid_knn.grid_covariances(grid_knn.build_grid(points, 40, tree), 40)
-    ref = neighbors.covariances(points, tree.query(points, k=40)[1])[1]
+    grid = grid_knn.build_grid(points, 40, tree)
+    covs, done = grid_knn.grid_covariances(grid, 40)  # in the grid's order
+    ref = neighbors.covariances(points, tree.query(points, k=40)[1])[1][grid.order]
     assert done.mean() > 0.9
     scale = np.abs(ref).max(axis=(1, 2))[done, None, None]
     np.testing.assert_allclose(covs[done] / scale, ref[done] / scale, atol=1e-9)
@@ -114,12 +115,22 @@ def test_knn_int32_lists_without_distances(grid_everywhere):
 
 
 @pytest.mark.parametrize("name", list(CLOUDS))
-def test_knn_covariances_match_for_every_point(grid_everywhere, name):
+def test_pca_normals_equal_those_of_the_tree_lists(grid_everywhere, monkeypatch, name):
+    monkeypatch.setattr(neighbors, "BLOCK_POINTS", 1000)  # several blocks, grid and tree rows in each
     points = CLOUDS[name]
-    covs = neighbors.knn_covariances(points, 30)
-    ref = neighbors.covariances(points, cKDTree(points).query(points, k=30)[1])[1]
-    scale = np.abs(ref).max(axis=(1, 2))[:, None, None] + 1e-300
-    np.testing.assert_allclose(covs / scale, ref / scale, atol=1e-9)
+    normals = neighbors.pca_normals(points, 30)
+    ref = neighbors.smallest_eigenvectors(neighbors.covariances(points, cKDTree(points).query(points, k=30)[1])[1])[1]
+    np.testing.assert_allclose(np.abs(np.einsum("ij,ij->i", normals, ref)), 1.0, atol=1e-9)
+
+
+def test_grid_covariances_of_a_block_equal_those_of_the_whole_cloud():
+    points = CLOUDS["noisy sphere"]
+    grid = grid_knn.build_grid(points, 40, cKDTree(points))
+    covs, done = grid_knn.grid_covariances(grid, 40)
+    block = slice(500, 1700)
+    part, part_done = grid_knn.grid_covariances(grid, 40, block)
+    np.testing.assert_array_equal(part_done, done[block])
+    np.testing.assert_array_equal(part[part_done], covs[block][done[block]])
 
 
 def test_pca_on_the_grid_recovers_known_normals(grid_everywhere):

@@ -10,7 +10,7 @@ from numba import njit
 
 from refinenet.config import BaselineConfig
 from refinenet.data.shapes import BIG_NOISE
-from refinenet.geometry.neighbors import build_tree, chunks, covariances, knn, knn_covariances, smallest_eigenvectors
+from refinenet.geometry.neighbors import build_tree, chunks, covariances, knn, pca_normals
 from refinenet.threads import thread_map
 
 METHODS = ("pca", "jet")
@@ -35,11 +35,6 @@ def fit_normals(points: np.ndarray, method: str, k: int, degree: int = 2) -> np.
     if method == "jet":
         return jet_normals(points, k, degree)
     raise ValueError(f"unknown baseline '{method}' (one of {METHODS})")
-
-
-def pca_normals(points: np.ndarray, k: int) -> np.ndarray:
-    """Normal = eigenvector of the smallest eigenvalue of the k-neighbourhood covariance (Hoppe et al. 1992)."""
-    return smallest_eigenvectors(knn_covariances(points, k))[1]
 
 
 def jet_normals(points: np.ndarray, k: int, degree: int = 2) -> np.ndarray:

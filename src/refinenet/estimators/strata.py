@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from refinenet.estimators.baselines import jet_fit
-from refinenet.geometry.neighbors import build_tree, chunks, knn
+from refinenet.geometry.neighbors import build_tree, chunks, knn, knn_blocks
 from refinenet.geometry.scale import sample_rows, spacing_unit
 
 #: Neighbours of the degree-2 jets whose residual measures the noise. Measured on the moai dev mesh: with 0.5% noise
@@ -68,12 +68,13 @@ def consensus_k(n_strata: int) -> int:
 def consensus(points: np.ndarray, normals: np.ndarray, k: int, angle: float = CONSENSUS_ANGLE) -> np.ndarray:
     """Unit normals (N, 3): each the sign-aligned mean of the `normals` of its k nearest points of the whole cloud
     (itself included) that lie within `angle` degrees of its own (`consensus_k` strata's worth of them)."""
-    idx = knn(points, min(k, len(points)), with_distances=False, index_dtype=np.int32)[1]
     gate = np.cos(np.radians(angle))
     agreed = np.empty_like(normals)
-    for rows in chunks(len(points), idx.shape[1]):
-        around = normals[idx[rows]]
-        dots = np.einsum("nkd,nd->nk", around, normals[rows])
-        weights = np.where(np.abs(dots) >= gate, np.sign(dots), 0.0)  # the point itself always counts
-        agreed[rows] = np.einsum("nk,nkd->nd", weights, around)
+    for block, idx in knn_blocks(points, min(k, len(points))):
+        for sl in chunks(len(block), idx.shape[1]):
+            rows = block[sl]
+            around = normals[idx[sl]]
+            dots = np.einsum("nkd,nd->nk", around, normals[rows])
+            weights = np.where(np.abs(dots) >= gate, np.sign(dots), 0.0)  # the point itself always counts
+            agreed[rows] = np.einsum("nk,nkd->nd", weights, around)
     return agreed / np.linalg.norm(agreed, axis=1, keepdims=True)

@@ -121,13 +121,14 @@ def grid_knn(grid: Grid, queries: np.ndarray, k: int, with_distances: bool = Tru
     return (dist if with_distances else None), idx, done
 
 
-def grid_covariances(grid: Grid, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Covariances (N, 3, 3), divided by k, of kNN_k of every grid point, without storing the lists, and the
-    `done` mask (rows not done are left for the tree)."""
-    m = len(grid.cloud)
-    covs = np.empty((m, 3, 3))
-    done = np.zeros(m, dtype=np.bool_)
-    _kernel(*_kernel_args(grid, grid.cloud), k, RINGS, grid.cap, grid.band, np.empty((0, k)),
+def grid_covariances(grid: Grid, k: int, block: slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+    """Covariances (M, 3, 3), divided by k, of kNN_k of the grid's points `grid.order[block]` (a block in cell
+    order is a compact piece of the cloud), without storing the lists, and the `done` mask (rows not done are
+    left for the tree)."""
+    queries = grid.points[block]
+    covs = np.empty((len(queries), 3, 3))
+    done = np.zeros(len(queries), dtype=np.bool_)
+    _kernel(*_kernel_args(grid, queries), k, RINGS, grid.cap, grid.band, np.empty((0, k)),
             np.empty((0, k), dtype=np.int64), covs, done)
     return covs, done
 

@@ -19,6 +19,8 @@ from refinenet.threads import native_threads
 #: Neighbour entries (rows x k) gathered per chunk: small enough that the gathered arrays stay in cache
 #: (measured: 100k x 100 covariances take 0.1 s in chunks of 1M entries, 0.65 s in chunks of 8M).
 CHUNK_ELEMENTS = 1_000_000
+#: Points per block of `knn_blocks` and `pca_normals`, which hold the lists or covariances of one block at a time.
+BLOCK_POINTS = 1 << 18
 #: Query sets at least this large, and at least a quarter of the cloud, go through the grid.
 GRID_MIN_QUERIES = 10_000
 
@@ -77,21 +79,46 @@ def _tree_knn(tree: cKDTree, query: np.ndarray, k: int, rows: np.ndarray, dist: 
             dist[rows[sl]] = d.reshape(-1, k)
 
 
-def knn_covariances(points: np.ndarray, k: int) -> np.ndarray:
-    """Covariances (N, 3, 3), divided by k, of kNN_k of every point: `covariances(points, knn(points, k)[1])[1]`
-    without storing the neighbour lists (the grid kernel accumulates them as it finds them)."""
+def knn_blocks(points: np.ndarray, k: int, index_dtype: type = np.int32) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The kNN_k lists of every point (as `knn`'s, without distances) a block at a time: (rows, their lists), so
+    that a large cloud's lists are never all held (at 10M points and k = 32, 1.3 GB)."""
+    for tree, grid, block, rows in _blocks(points, k):
+        if grid is None:
+            idx, rest = np.empty((len(rows), k), dtype=index_dtype), np.arange(len(rows))
+        else:
+            _, idx, done = grid_knn(grid, grid.points[block], k, False, index_dtype)
+            rest = np.flatnonzero(~done)
+        _tree_knn(tree, tree.data[rows], k, rest, None, idx)
+        yield rows, idx
+
+
+def pca_normals(points: np.ndarray, k: int) -> np.ndarray:
+    """Normal = eigenvector of the smallest eigenvalue of the k-neighbourhood covariance (Hoppe et al. 1992), unit
+    and unoriented, of every point; a block at a time, so that neither the lists nor all the N x 3 x 3
+    covariances are held (at 10M points 1.2 and 0.7 GB)."""
+    normals = np.empty((len(points), 3))
+    for tree, grid, block, rows in _blocks(points, k):
+        if grid is None:
+            covs, done = np.empty((len(rows), 3, 3)), np.zeros(len(rows), dtype=bool)
+        else:
+            covs, done = grid_covariances(grid, k, block)
+        rest = np.flatnonzero(~done)
+        for sl in chunks(len(rest), k):
+            idx = tree.query(tree.data[rows[rest[sl]]], k=k, workers=native_threads())[1].reshape(-1, k)
+            covs[rest[sl]] = covariances(tree.data, idx)[1]
+        normals[rows] = smallest_eigenvectors(covs)[1]
+    return normals
+
+
+def _blocks(points: np.ndarray, k: int) -> Iterator[tuple[cKDTree, Grid | None, slice, np.ndarray]]:
+    """The cloud's tree and grid for kNN_k queries, and its blocks of BLOCK_POINTS (`block` in the grid's cell
+    order, else the tree's leaf order, so that each is a compact piece of the cloud, and the `rows` it holds)."""
     points = _cloud_for(points, k)
     tree = build_tree(points)
     grid = _grid_for(points, k, tree, len(points))
-    if grid is None:
-        covs, done = np.empty((len(points), 3, 3)), np.zeros(len(points), dtype=bool)
-    else:
-        covs, done = grid_covariances(grid, k)
-    rest = np.flatnonzero(~done)
-    for sl in chunks(len(rest), k):
-        rows = rest[sl]
-        covs[rows] = covariances(points, tree.query(points[rows], k=k, workers=native_threads())[1].reshape(-1, k))[1]
-    return covs
+    order = tree.indices if grid is None else grid.order
+    for block in chunks(len(points), 1, BLOCK_POINTS):
+        yield tree, grid, block, order[block]
 
 
 def chunks(n: int, k: int, max_elements: int = CHUNK_ELEMENTS) -> Iterator[slice]:

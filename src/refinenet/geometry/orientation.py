@@ -20,17 +20,13 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 
-from refinenet.geometry.neighbors import chunks, knn, knn_covariances, smallest_eigenvectors
+from refinenet.geometry.neighbors import knn, pca_normals
 
 #: Neighbours per point in the propagation graph.
 MST_K = 12
 #: Neighbours of the PCA normals the walk runs on.
 GUIDE_K = 30
-#: Added to every edge cost: scipy drops zero-weight edges, and parallel neighbours would have cost 0.
-COST_FLOOR = 1e-6
 
 
 def orient_viewpoint(points: np.ndarray, normals: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
@@ -45,41 +41,114 @@ def orient_mst(points: np.ndarray, normals: np.ndarray, k: int = MST_K) -> np.nd
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     n = len(points)
-    guide = smallest_eigenvectors(knn_covariances(points, min(GUIDE_K + 1, n)))[1]
-    k = min(k + 1, n)
-    neighbours = knn(points, k, with_distances=False, index_dtype=np.int32)[1]
-    # The k-NN graph as CSR (row i: its k - 1 neighbours), built without per-edge index or normal copies: at
-    # 10M points every array of one entry per edge costs about 1 GB.
-    cols = neighbours[:, 1:].ravel()
-    del neighbours
-    cost = np.empty(len(cols))
-    for sl in chunks(n, k):
-        edges = slice(sl.start * (k - 1), sl.stop * (k - 1))
-        own = np.repeat(guide[sl], k - 1, axis=0)
-        cost[edges] = 1.0 - np.abs(np.einsum("ij,ij->i", own, guide[cols[edges]])) + COST_FLOOR
-    graph = csr_matrix((cost, cols, np.arange(0, len(cols) + 1, k - 1)), shape=(n, n))
-    del cost, cols
-    tree = minimum_spanning_tree(graph, overwrite=True)  # else scipy copies the graph (1.4 GB at 10M points)
-    del graph
-    n_parts, part = connected_components(tree, directed=False)
-    # One walk for all parts (a scan can have thousands): from an extra node n with normal +z, linked to each
-    # part's highest point, so that the propagation itself turns every root upwards.
-    by_height = np.lexsort((-points[:, 2], part))
-    roots = by_height[np.searchsorted(part[by_height], np.arange(n_parts))]
-    tree.resize((n + 1, n + 1))
-    tree = tree + csr_matrix((np.ones(n_parts), (np.full(n_parts, n), roots)), shape=(n + 1, n + 1))
-    oriented = np.vstack([guide, [0.0, 0.0, 1.0]])
-    order, parent = breadth_first_order(tree, n, directed=False, return_predecessors=True)
-    _propagate(oriented, order, parent)
-    return np.where((np.einsum("ij,ij->i", normals, oriented[:n]) < 0)[:, None], -normals, normals)
+    guide = pca_normals(points, min(GUIDE_K + 1, n))
+    neighbours = knn(points, min(k + 1, n), with_distances=False, index_dtype=np.int32)[1]
+    # Roots in falling height (ties: the lower index), so that each part's walk starts at its highest point.
+    roots = np.argsort(-points[:, 2], kind="stable")
+    _orient_along_mst(guide, neighbours, *_reverse_lists(neighbours, n), roots)
+    return np.where((np.einsum("ij,ij->i", normals, guide) < 0)[:, None], -normals, normals)
 
 
 @numba.njit(cache=True)
-def _propagate(normals: np.ndarray, order: np.ndarray, parent: np.ndarray) -> None:
-    """In breadth-first order, flip each normal that disagrees with its (already oriented) parent's."""
-    for i in order[1:]:
-        j = parent[i]
-        if normals[i, 0] * normals[j, 0] + normals[i, 1] * normals[j, 1] + normals[i, 2] * normals[j, 2] < 0:
-            normals[i, 0] = -normals[i, 0]
-            normals[i, 1] = -normals[i, 1]
-            normals[i, 2] = -normals[i, 2]
+def _reverse_lists(neighbours: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The k-NN graph's reverse edges as CSR (`starts`, `sources`): the points whose lists hold each point (its
+    own first column left out), so that the walk sees every edge from both ends, as in an undirected graph."""
+    starts = np.zeros(n + 1, dtype=np.int64)
+    for i in range(len(neighbours)):
+        for j in neighbours[i, 1:]:
+            starts[j + 1] += 1
+    for i in range(n):
+        starts[i + 1] += starts[i]
+    fill = starts[:-1].copy()
+    sources = np.empty(starts[n], dtype=np.int32)
+    for i in range(len(neighbours)):
+        for j in neighbours[i, 1:]:
+            sources[fill[j]] = i
+            fill[j] += 1
+    return starts, sources
+
+
+@numba.njit(cache=True)
+def _orient_along_mst(normals: np.ndarray, neighbours: np.ndarray, starts: np.ndarray, sources: np.ndarray,
+                      roots: np.ndarray) -> None:
+    """Prim's minimum spanning forest of the graph of edge cost 1 - |n_i . n_j|, flipping each normal, as its
+    point joins the tree, to agree with the one it joins through; each part's first point (in `roots` order)
+    turns upwards. The costs are computed as they are met and the heap holds one entry per point, so that
+    besides the graph's lists (about 1 GB at 10M points) the walk needs a few bytes per point."""
+    n = len(normals)
+    key = np.full(n, np.inf)
+    parent = np.full(n, -1, dtype=np.int32)  # int32 as the lists are
+    joined = np.zeros(n, dtype=np.bool_)
+    heap = np.empty(n, dtype=np.int32)  # a binary min-heap of points by key; place[i]: i's slot, -1 outside
+    place = np.full(n, -1, dtype=np.int32)
+    for root in roots:
+        if joined[root]:
+            continue
+        if normals[root, 2] < 0:
+            normals[root] = -normals[root]
+        heap[0], place[root], size = root, 0, 1
+        while size:
+            i = heap[0]
+            place[i] = -1
+            size -= 1
+            if size:
+                heap[0] = heap[size]
+                _sift_down(heap, place, key, 0, size)
+            joined[i] = True
+            j = parent[i]
+            if j >= 0 and _dot(normals, i, j) < 0:
+                normals[i] = -normals[i]
+            for v in neighbours[i, 1:]:
+                size = _relax(normals, key, parent, joined, heap, place, size, i, v)
+            for v in sources[starts[i]:starts[i + 1]]:
+                size = _relax(normals, key, parent, joined, heap, place, size, i, v)
+
+
+@numba.njit(cache=True)
+def _dot(normals: np.ndarray, i: int, j: int) -> float:
+    return normals[i, 0] * normals[j, 0] + normals[i, 1] * normals[j, 1] + normals[i, 2] * normals[j, 2]
+
+
+@numba.njit(cache=True)
+def _relax(normals, key, parent, joined, heap, place, size, i, v):
+    """Offer point v the edge from the tree's point i; returns the heap's new size."""
+    if joined[v]:
+        return size
+    cost = 1.0 - abs(_dot(normals, i, v))
+    if cost < key[v]:
+        key[v], parent[v] = cost, i
+        if place[v] < 0:
+            heap[size], place[v] = v, size
+            size += 1
+        _sift_up(heap, place, key, place[v])
+    return size
+
+
+@numba.njit(cache=True)
+def _sift_up(heap: np.ndarray, place: np.ndarray, key: np.ndarray, slot: int) -> None:
+    item = heap[slot]
+    while slot > 0:
+        up = (slot - 1) >> 1
+        if key[heap[up]] <= key[item]:
+            break
+        heap[slot] = heap[up]
+        place[heap[slot]] = slot
+        slot = up
+    heap[slot], place[item] = item, slot
+
+
+@numba.njit(cache=True)
+def _sift_down(heap: np.ndarray, place: np.ndarray, key: np.ndarray, slot: int, size: int) -> None:
+    item = heap[slot]
+    while True:
+        child = 2 * slot + 1
+        if child >= size:
+            break
+        if child + 1 < size and key[heap[child + 1]] < key[heap[child]]:
+            child += 1
+        if key[item] <= key[heap[child]]:
+            break
+        heap[slot] = heap[child]
+        place[heap[slot]] = slot
+        slot = child
+    heap[slot], place[item] = item, slot
