@@ -110,7 +110,8 @@ def _dot(normals: np.ndarray, i: int, j: int) -> float:
 
 
 @numba.njit(cache=True)
-def _relax(normals, key, parent, joined, heap, place, size, i, v):
+def _relax(normals: np.ndarray, key: np.ndarray, parent: np.ndarray, joined: np.ndarray, heap: np.ndarray,
+           place: np.ndarray, size: int, i: int, v: int) -> int:
     """Offer point v the edge from the tree's point i; returns the heap's new size."""
     if joined[v]:
         return size
