@@ -45,23 +45,24 @@ def orient_mst(points: np.ndarray, normals: np.ndarray, k: int = MST_K) -> np.nd
     neighbours = knn(points, min(k + 1, n), with_distances=False, index_dtype=np.int32)[1]
     # Roots in falling height (ties: the lower index), so that each part's walk starts at its highest point.
     roots = np.argsort(-points[:, 2], kind="stable")
-    _orient_along_mst(guide, neighbours, *_reverse_lists(neighbours, n), roots)
+    _orient_along_mst(guide, neighbours, *_reverse_lists(neighbours), roots)
     return np.where((np.einsum("ij,ij->i", normals, guide) < 0)[:, None], -normals, normals)
 
 
 @numba.njit(cache=True)
-def _reverse_lists(neighbours: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _reverse_lists(neighbours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The k-NN graph's reverse edges as CSR (`starts`, `sources`): the points whose lists hold each point (its
     own first column left out), so that the walk sees every edge from both ends, as in an undirected graph."""
+    n = len(neighbours)
     starts = np.zeros(n + 1, dtype=np.int64)
-    for i in range(len(neighbours)):
+    for i in range(n):
         for j in neighbours[i, 1:]:
             starts[j + 1] += 1
     for i in range(n):
         starts[i + 1] += starts[i]
     fill = starts[:-1].copy()
     sources = np.empty(starts[n], dtype=np.int32)
-    for i in range(len(neighbours)):
+    for i in range(n):
         for j in neighbours[i, 1:]:
             sources[fill[j]] = i
             fill[j] += 1
