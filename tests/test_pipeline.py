@@ -47,8 +47,7 @@ from refinenet.pipeline.methods import FULL
 from refinenet.pipeline.page import reported
 from refinenet.pipeline.workflow import Pipeline
 
-#: One xdist group: the module's tests share the smoke runs of its fixtures, which a second process would repeat.
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("pipeline")]
+pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
 #: Seconds the uninterrupted smoke run of the main job took, for spreading the kills of the kill-anywhere test.
 LENGTH: dict[str, float] = {}
