@@ -77,6 +77,7 @@ from refinenet.evaluation.metrics import ErrorStats, unoriented_angles  # noqa: 
 from refinenet.evaluation.table import METHOD_NAMES, aggregate, stats_row, to_csv_frame  # noqa: E402
 from refinenet.network.devices import resolve_device, resolve_precision  # noqa: E402
 from refinenet.network.release import SHIPPED, load_release  # noqa: E402
+from refinenet.threads import thread_independent_products  # noqa: E402
 
 #: params.yaml as written (no profile): the paper's synthetic settings of the baselines, MFPS and the noise.
 PARAMS = params_lib.load(Path(__file__).resolve().parents[1] / "params.yaml", apply_profile=False)
@@ -453,6 +454,7 @@ def main() -> None:
     parser.add_argument("--report", action="store_true",
                         help="compute nothing: rebuild the report and plot under --out from its dev_meshes.json")
     args = parser.parse_args()
+    thread_independent_products()  # Refine-Net's normals bit for bit as `refinenet normals` computes them
     if args.report:
         record = json.loads((args.out / f"{STEM}.json").read_text())
         report(args.out, record | {"not_run": {m: "not in this run" for m in PEER_METHODS

@@ -9,6 +9,11 @@ import pytest
 
 from refinenet.evaluation.metrics import ErrorStats
 from refinenet.evaluation.table import stats_row
+from refinenet.threads import thread_independent_products
+
+# The tests compare in-process runs with the commands' (a tile job here against `refinenet normals` there): they run
+# in the commands' MKL mode, and so do the processes they start.
+thread_independent_products()
 
 # The suite starts its subprocesses from worker threads while torch's own threads run; a CI run once saw such a
 # vfork()ed child fail its exec with EFAULT ("[Errno 14] Bad address"). fork() copies the address space instead of

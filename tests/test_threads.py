@@ -35,9 +35,10 @@ def test_an_unusable_limit_falls_back_to_the_cores(clean_env, monkeypatch, value
 
 
 def test_a_float32_product_is_bitwise_the_same_on_one_thread_and_two(tmp_path):
-    """The output module's product (K = 2112): MKL splits its sums by thread on AVX-512 CPUs unless the package
-    has put it in strict reproducible mode, and a one-thread tile job then disagrees with a two-thread process."""
-    script = ("import sys, torch, refinenet; torch.set_num_threads(int(sys.argv[1]));"
+    """The output module's product (K = 2112): MKL splits its sums by thread on AVX-512 CPUs unless a command has
+    put it in strict reproducible mode, and a one-thread tile job then disagrees with a two-thread process."""
+    script = ("import sys, torch; from refinenet.threads import thread_independent_products;"
+              "thread_independent_products(); torch.set_num_threads(int(sys.argv[1]));"
               "g = torch.Generator().manual_seed(0);"
               "x, w = torch.randn(1024, 2112, generator=g), torch.randn(256, 2112, generator=g);"
               "torch.save(torch.nn.functional.linear(x, w), sys.argv[2])")

@@ -19,6 +19,16 @@ def limit_native_threads(threads: int | str) -> None:
         os.environ[variable] = str(threads)
 
 
+def thread_independent_products() -> None:
+    """Put MKL in its strict reproducible mode (unless MKL_CBWR is set), for the commands whose results must not
+    depend on the thread count: on AVX-512 CPUs torch's float32 products of large K (the output module's 2112
+    inputs) otherwise split their sums by thread, and a one-thread tile job disagreed with a two-thread process in
+    the last bit. The pipeline's steps run at fixed thread counts and do without it: the mode changes the last bits
+    of training's products, and the committed networks were trained in MKL's default mode. MKL reads it at its
+    first call, so it holds even where torch was imported first."""
+    os.environ.setdefault("MKL_CBWR", "AUTO,STRICT")
+
+
 def native_threads() -> int:
     """The threads native code may use: the limit `limit_native_threads` set, else every core this process may use.
     scipy's `workers=-1` would take every core of the machine whatever a job was given, and start that many threads

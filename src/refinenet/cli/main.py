@@ -17,7 +17,7 @@ from pathlib import Path
 
 from refinenet import interrupts
 from refinenet.atomic import remove_temporaries
-from refinenet.threads import limit_native_threads
+from refinenet.threads import limit_native_threads, thread_independent_products
 
 EXIT_BAD_INPUT = 2
 #: More threads than this only exhaust the machine (torch and OpenMP fail to start them, far from the user's input).
@@ -200,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
         return _fail(f"--threads: must be 1 to {MAX_THREADS}, got {args.threads}")
     if args.command in ("normals", "tiles"):
         limit_native_threads(args.threads)
+        thread_independent_products()
     from refinenet.errors import RefineNetError
 
     handlers = {sig: signal.signal(sig, _interrupt) for sig in SIGNALS}

@@ -73,9 +73,10 @@ class _BatchRunner:
     """Runs the networks on batches, each on one thread, `threads` at a time, and hands each result to `put` in
     the order submitted. A batch of a few thousand patches is too small for two threads to share well (each
     product waits for the slower thread): side by side on one thread each they take less time, and the patches
-    of the next batch are made meanwhile. One-thread products equal those of any thread count, bit for bit
-    (`MKL_CBWR`, set in `refinenet`), so the normals do not depend on `threads`. With one thread (a GPU, or a
-    job given one) each batch runs at once, with the process's torch threads."""
+    of the next batch are made meanwhile. One-thread products equal those of any thread count, bit for bit, in
+    MKL's strict mode (which the commands set: `threads.thread_independent_products`), so their normals do not
+    depend on `threads`. With one thread (a GPU, or a job given one) each batch runs at once, with the process's
+    torch threads."""
 
     def __init__(self, threads: int, put: Callable[[np.ndarray, np.ndarray], None]) -> None:
         self.threads, self.put = threads, put
