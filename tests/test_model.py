@@ -15,10 +15,12 @@ from refinenet.network.model import (
     FEATURES,
     FUSED_RELU_DTYPES,
     PRECISIONS,
+    Conv2dReLU,
     LinearReLU,
     NetworkConfig,
     RefineNet,
     RotationMatrix,
+    SlidingMax,
     TransformationMatrix,
     architecture_table,
     count_parameters,
@@ -382,6 +384,41 @@ def test_the_fused_relus_give_the_network_of_the_two_layers_bit_for_bit(precisio
     assert counter.get_flop_counts()["Global"][torch.ops.mkldnn._linear_pointwise] == 4 * 3  # 4 layers, 3 chunks
     assert torch.equal(got, expected)
     assert torch.equal(fused(*inputs).detach(), expected)  # with gradients enabled: the two layers themselves
+
+
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_the_fused_convolutions_give_the_height_map_module_bit_for_bit(precision):
+    """`Conv2dReLU` takes the place of every convolution and its ReLU, `SlidingMax` of every max-pool, and the
+    network's outputs equal those of the layers as trained exactly."""
+    if PRECISIONS[precision] not in FUSED_RELU_DTYPES:
+        pytest.skip(f"oneDNN's fused ops do not take {precision} on this CPU")
+    torch.manual_seed(0)
+    model = RefineNet(preset("release"))
+    for seed in range(3):
+        model(*_inputs(model.config, 16, seed=seed))
+    model.eval()
+    with mock.patch("refinenet.network.model._fuse_convolutions"):
+        plain = for_inference(copy.deepcopy(model), True, precision)
+    fused = for_inference(model, True, precision)
+    maps = fused.height_map_module
+    assert sum(isinstance(layer, Conv2dReLU) for layer in maps) == 5
+    assert sum(isinstance(layer, SlidingMax) for layer in maps) == 2
+    assert not any(isinstance(layer, torch.nn.ReLU | torch.nn.MaxPool2d) for layer in list(maps)[:maps.n_convolutional])
+    inputs = _inputs(model.config, 150)
+    with torch.inference_mode():
+        assert torch.equal(fused(*inputs), plain(*inputs))
+    assert torch.equal(fused(*inputs).detach(), plain(*inputs).detach())  # with gradients: the layers themselves
+
+
+@pytest.mark.parametrize("memory_format", [torch.contiguous_format, torch.channels_last])
+def test_sliding_max_is_the_max_pool_of_stride_one(memory_format):
+    x = torch.randn(4, 6, 9, 7).contiguous(memory_format=memory_format)
+    x[0, 0, 2, 3] = float("nan")
+    for k in (2, 3):
+        assert torch.equal(SlidingMax(k)(x).isnan(), torch.nn.MaxPool2d(k, stride=1)(x).isnan())
+        torch.testing.assert_close(SlidingMax(k)(x), torch.nn.MaxPool2d(k, stride=1)(x), rtol=0, atol=0,
+                                   equal_nan=True)
+    assert not SlidingMax.replaces(torch.nn.MaxPool2d(3)) and SlidingMax.replaces(torch.nn.MaxPool2d(3, stride=1))
 
 
 @pytest.mark.parametrize("fuse, precision", [(True, "bfloat16"), (True, "float32"), (False, "bfloat16")])
