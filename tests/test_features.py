@@ -14,8 +14,15 @@ import refinenet.features.cache as features_module
 from refinenet.data.io import save_record
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError, ParamsError
-from refinenet.features.cache import compute_features, load_features, load_for_cloud, save_features
+from refinenet.features.cache import (
+    compute_features,
+    load_features,
+    load_for_cloud,
+    neighbour_width,
+    save_features,
+)
 from refinenet.features.heightmaps import height_maps
+from refinenet.geometry.neighbors import neighbour_lists
 
 
 def noisy_cube(n: int, seed: int = 0, noise: float = 0.003) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -95,6 +102,22 @@ def test_height_chunks_and_extent_match_one_direct_call(cube, monkeypatch):
                          extent=0.05 * bbox_diagonal(points))
     assert features.heights.dtype == np.float32 and features.heights.shape[2:] == (5, 5)
     np.testing.assert_allclose(features.heights, direct, atol=1e-5)
+
+
+@pytest.mark.parametrize("smooth_jet, jet_k", [(1.5, 50), (None, None)])
+def test_features_from_shared_lists_equal_those_of_their_own_queries(cube, smooth_jet, jet_k):
+    """The smooth-point jet, the wide jet and rho take the first columns of one list per point: the same features,
+    bit for bit, for every point or for some rows."""
+    points, _, initial = cube
+    config = feature_config(smooth_jet=smooth_jet, jet_k=jet_k, pca_k=100)
+    lists = neighbour_lists(points, neighbour_width(config))
+    rows = np.arange(5, len(points), 3)
+    for centres in (None, rows):
+        shared = compute_features(points, initial, config, centres=centres, neighbours=lists)
+        own = compute_features(points, initial, config, centres=centres)
+        for name in ("nf", "frames", "heights"):
+            np.testing.assert_array_equal(getattr(shared, name), getattr(own, name))
+    assert neighbour_width(config) == (100 if smooth_jet else config.hmp_k)
 
 
 def test_round_trip(tmp_path, cube):

@@ -142,3 +142,19 @@ def test_pca_on_the_grid_recovers_known_normals(grid_everywhere):
     sphere = _sphere(20000)
     angles = unoriented_angles(pca_normals(sphere, 30), sphere)
     assert angles.mean() < 0.5 and angles.max() < 2.0
+
+
+@pytest.mark.parametrize("name", list(CLOUDS))
+def test_shared_lists_give_each_narrower_knn_and_its_last_distance(grid_everywhere, name):
+    """The first k columns of one wide list are kNN_k itself, and the distance to the last of them is `knn`'s, to
+    the bit: the stages that share a tile's lists get what their own queries would give."""
+    points = CLOUDS[name]
+    lists = neighbors.neighbour_lists(points, 40)
+    assert lists.dtype == np.int32
+    for k in (10, 25, 40):
+        dist, idx = neighbors.knn(points, k)
+        first = neighbors.first_neighbours(lists, k)
+        np.testing.assert_array_equal(first, idx)
+        np.testing.assert_array_equal(neighbors.farthest_distance(points, points, first), dist[:, -1])
+    with pytest.raises(ValueError, match="lists of 40 neighbours, 41 needed"):
+        neighbors.first_neighbours(lists, 41)

@@ -7,6 +7,7 @@ import pytest
 
 from refinenet.features.patches import point_patches
 from refinenet.geometry.frames import normal_frames, to_local
+from refinenet.geometry.neighbors import neighbour_lists
 
 
 @pytest.fixture
@@ -32,6 +33,15 @@ def test_knn_patch_of_a_plane_is_flat_in_the_frame_with_unit_radius(tilted_plane
     unrotated = point_patches(points, k=50, index=index)
     np.testing.assert_allclose(patches, to_local(frames[index], unrotated.astype(np.float64)), atol=1e-6)
     np.testing.assert_array_equal(point_patches(points, k=50)[index], unrotated)
+
+
+def test_knn_patches_from_shared_lists_equal_those_of_their_own_query(tilted_plane):
+    points, nf = tilted_plane
+    index = np.arange(3, 2000, 11)
+    frames = normal_frames(nf)[index]
+    lists = neighbour_lists(points, 80)[index]
+    np.testing.assert_array_equal(point_patches(points, k=50, frames=frames, index=index, neighbours=lists),
+                                  point_patches(points, k=50, frames=frames, index=index))
 
 
 def test_ball_patches_are_padded_subsets_within_the_radius(tilted_plane):

@@ -22,7 +22,8 @@ from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, 
 from refinenet.estimators.smooth_jet import point_noise
 from refinenet.estimators.strata import consensus, consensus_k, strata, strata_needed
 from refinenet.features.cache import compute_features
-from refinenet.geometry.neighbors import build_tree
+from refinenet.features.cache import neighbour_width as features_width
+from refinenet.geometry.neighbors import build_tree, neighbour_lists
 from refinenet.geometry.scale import neighbour_distance, spacing_unit
 from refinenet.geometry.tiles import Tile, tiles
 from refinenet.network.inference import refine_normals
@@ -174,18 +175,31 @@ def tile_normals(points: np.ndarray, tile: Tile, shared: CloudLayout, release: R
     if method in ("pca", "jet"):
         with stage(method):
             return baseline_normals(sub, method, params.baselines, None)[rows]
+    with stage("neighbours"):
+        neighbours = neighbour_lists(sub, min(neighbour_width(params, method, initial is not None), len(sub)))
     if initial is not None:
         start = initial[tile.ids]
     else:
         with stage("mfps"):
             start = mfps_normals(sub, params.mfps, progress, workers, length=shared.length, ids=tile.ids,
-                                 candidacy=shared.candidacy)
+                                 candidacy=shared.candidacy, neighbours=neighbours)
     if method == "mfps":
         return start[rows]
     features = compute_features(sub, start, params.features, progress, length=shared.length, centres=rows,
-                                workers=workers, noise=shared.noise)
+                                workers=workers, noise=shared.noise, neighbours=neighbours)
+    neighbours = neighbours[rows, :params.patches.k] if params.patches.mode == "knn" else None
     return refine_normals(sub, features, release.cluster_model, release.networks, params.patches,
-                          replace(params.inference, device=device), progress=progress, length=shared.length)
+                          replace(params.inference, device=device), progress=progress, length=shared.length,
+                          neighbours=neighbours)
+
+
+def neighbour_width(params: Params, method: str, given_initial: bool) -> int:
+    """How many neighbours the widest kNN list of `method`'s chain holds (MFPS's, the features' or the patches'):
+    a tile's lists are found once, at this width, and every stage takes the first columns it needs."""
+    widths = [] if given_initial else [params.mfps.scales[-1], params.mfps.k_bw]
+    if method == "refinenet":
+        widths += [features_width(params.features), params.patches.k if params.patches.mode == "knn" else 0]
+    return max(widths, default=1)
 
 
 #: The estimators the scan figure and table compare Refine-Net with, each with a release's settings.

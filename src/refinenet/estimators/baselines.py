@@ -10,7 +10,7 @@ from numba import njit
 
 from refinenet.config import BaselineConfig
 from refinenet.data.shapes import BIG_NOISE
-from refinenet.geometry.neighbors import build_tree, chunks, covariances, knn, pca_normals
+from refinenet.geometry.neighbors import build_tree, chunks, covariances, first_neighbours, knn, pca_normals
 from refinenet.threads import thread_map
 
 METHODS = ("pca", "jet")
@@ -28,19 +28,22 @@ def baseline_normals(points: np.ndarray, method: str, config: BaselineConfig, ca
     return fit_normals(points, method, neighbourhood_size(config, method, category), config.jet_degree)
 
 
-def fit_normals(points: np.ndarray, method: str, k: int, degree: int = 2) -> np.ndarray:
-    """Normals of `method` (pca, or a jet of `degree`) fitted to the k nearest neighbours of every point."""
+def fit_normals(points: np.ndarray, method: str, k: int, degree: int = 2,
+                neighbours: np.ndarray | None = None) -> np.ndarray:
+    """Normals of `method` (pca, or a jet of `degree`) fitted to the k nearest neighbours of every point. A jet
+    takes them from `neighbours`, the points' kNN lists, when shared (PCA sums its neighbourhoods on a grid)."""
     if method == "pca":
         return pca_normals(points, k)
     if method == "jet":
-        return jet_normals(points, k, degree)
+        return jet_normals(points, k, degree, neighbours)
     raise ValueError(f"unknown baseline '{method}' (one of {METHODS})")
 
 
-def jet_normals(points: np.ndarray, k: int, degree: int = 2) -> np.ndarray:
+def jet_normals(points: np.ndarray, k: int, degree: int = 2, neighbours: np.ndarray | None = None) -> np.ndarray:
     """Normal of an osculating jet (Cazals & Pouget 2005): a least-squares height function of `degree`."""
     points = np.asarray(points, dtype=np.float64)
-    return jet_fit(points, knn(points, k, tree=build_tree(points))[1], degree)[0]
+    idx = knn(points, k, tree=build_tree(points))[1] if neighbours is None else first_neighbours(neighbours, k)
+    return jet_fit(points, idx, degree)[0]
 
 
 def jet_fit(points: np.ndarray, idx: np.ndarray, degree: int = 2) -> tuple[np.ndarray, np.ndarray]:

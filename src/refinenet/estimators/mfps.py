@@ -30,7 +30,14 @@ from tqdm import tqdm
 from refinenet.config import MFPSConfig
 from refinenet.data.io import check_array
 from refinenet.data.noise import bbox_diagonal
-from refinenet.geometry.neighbors import chunks, covariances, knn, smallest_eigenvectors
+from refinenet.geometry.neighbors import (
+    chunks,
+    covariances,
+    first_neighbours,
+    knn,
+    neighbour_lists,
+    smallest_eigenvectors,
+)
 from refinenet.profiling import stage
 from refinenet.threads import thread_map
 
@@ -439,16 +446,18 @@ def select_fitting_patches(points: np.ndarray, centroids: np.ndarray, candidates
 def mfps_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
                  workers: int | None = None, stats: dict[str, int] | None = None,
                  length: float | None = None, ids: np.ndarray | None = None,
-                 candidacy: Candidacy | None = None) -> np.ndarray:
+                 candidacy: Candidacy | None = None, neighbours: np.ndarray | None = None) -> np.ndarray:
     """Unit, unoriented MFPS normals (N, 3) of a cloud (docs/algorithm.md §2); the arguments are
     `mfps_and_simple_normals`'s."""
-    return mfps_and_simple_normals(points, config, progress, workers, stats, length, ids, candidacy)["mfps"]
+    return mfps_and_simple_normals(points, config, progress, workers, stats, length, ids, candidacy,
+                                   neighbours)["mfps"]
 
 
 def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bool = False,
                             workers: int | None = None, stats: dict[str, int] | None = None,
                             length: float | None = None, ids: np.ndarray | None = None,
-                            candidacy: Candidacy | None = None) -> dict[str, np.ndarray]:
+                            candidacy: Candidacy | None = None,
+                            neighbours: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Unit, unoriented normals (N, 3) of a cloud by each of METHODS: MFPS (docs/algorithm.md §2) and its simple-MFPS
     ablation, which differ only in the last step (A.5), so one pass fits the patches for both.
 
@@ -457,7 +466,8 @@ def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bo
     receives the numbers of candidates and of fitted patches.
     A tile of a larger cloud passes the whole cloud's `length` (l_d, default the bounding-box diagonal),
     its points' `ids` in the whole cloud and the whole cloud's `candidacy`; its points then get the normals
-    they get in the whole cloud, wherever their neighbourhoods lie inside the tile.
+    they get in the whole cloud, wherever their neighbourhoods lie inside the tile. `neighbours` are kNN lists of
+    the points (`neighbors.neighbour_lists`) at least as wide as MFPS's widest, when the caller shares them.
     """
     k0, k_max, k_bw = config.k0, config.scales[-1], config.k_bw
     points = check_array("points", np.ascontiguousarray(points, dtype=np.float64), "points",
@@ -468,8 +478,10 @@ def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bo
     def step(name: str, total: int = 1) -> AbstractContextManager[tqdm]:
         return _step(name, total, progress)
 
-    with step("kNN", len(points)) as bar:
-        neighbours = _neighbour_lists(points, max(k_max, k_bw), bar.update)
+    if neighbours is None:
+        with step("kNN", len(points)):
+            neighbours = neighbour_lists(points, max(k_max, k_bw))
+    neighbours = first_neighbours(neighbours, max(k_max, k_bw))
     with step("A.1 candidates"):
         centroids, covs = covariances(points, neighbours[:, :k0])
         eigenvalues, normals = smallest_eigenvectors(covs)
@@ -512,13 +524,6 @@ def _step(name: str, total: int, progress: bool) -> Iterator[tqdm]:
     with stage(name), tqdm(total=total, desc=f"MFPS {name}", disable=not progress) as bar:
         yield bar
         bar.update(total - bar.n)
-
-
-def _neighbour_lists(points: np.ndarray, k: int, tick: Callable[[int], None]) -> np.ndarray:
-    """kNN_k of every point as int32 (closest first, self included): int32 and no distances halve the memory."""
-    out = knn(points, k, with_distances=False, index_dtype=np.int32)[1]
-    tick(len(points))
-    return out
 
 
 def _touches(candidate: np.ndarray, neighbours: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ import numpy as np
 
 from refinenet.estimators.baselines import jet_fit
 from refinenet.geometry.frames import target_sign
-from refinenet.geometry.neighbors import build_tree, knn
+from refinenet.geometry.neighbors import build_tree, first_neighbours, knn
 
 #: Neighbours of the jet whose normal replaces the initial one: the paper's Jet K.
 JET_K = 100
@@ -31,11 +31,14 @@ def point_noise(points: np.ndarray, index: np.ndarray | None = None) -> np.ndarr
     return jet_fit(points, knn(points, NOISE_K, tree=build_tree(points), query=query, with_distances=False)[1])[1]
 
 
-def jet_and_noise(points: np.ndarray, noise: float | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+def jet_and_noise(points: np.ndarray, noise: float | None = None,
+                  neighbours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """The K = JET_K jets' normals (N, 3) and RMS residuals (N,) at every point, and `noise` (default: the median
-    of `point_noise` over these points)."""
+    of `point_noise` over these points). `neighbours`: the points' kNN lists, if shared, at least JET_K wide."""
     points = np.asarray(points, dtype=np.float64)
-    neighbours = knn(points, min(JET_K, len(points)), tree=build_tree(points), with_distances=False)[1]
+    k = min(JET_K, len(points))
+    neighbours = knn(points, k, tree=build_tree(points), with_distances=False)[1] if neighbours is None \
+        else first_neighbours(neighbours, k)
     if noise is None:
         noise = float(np.median(jet_fit(points, neighbours[:, :NOISE_K])[1]))
     normals, residuals = jet_fit(points, neighbours)
@@ -43,10 +46,10 @@ def jet_and_noise(points: np.ndarray, noise: float | None = None) -> tuple[np.nd
 
 
 def smooth_jet_normals(points: np.ndarray, initial: np.ndarray, ratio: float,
-                       noise: float | None = None) -> np.ndarray:
+                       noise: float | None = None, neighbours: np.ndarray | None = None) -> np.ndarray:
     """`initial` (N, 3) with the K = JET_K jet normal, on the initial normal's side, wherever that jet's RMS
-    residual is below `ratio` x `noise` (`jet_and_noise`)."""
-    normals, residuals, noise = jet_and_noise(points, noise)
+    residual is below `ratio` x `noise` (`jet_and_noise`, which takes `neighbours`)."""
+    normals, residuals, noise = jet_and_noise(points, noise, neighbours)
     smooth = residuals < ratio * noise
     out = np.array(initial, copy=True)
     out[smooth] = target_sign(normals[smooth], out[smooth]).astype(out.dtype)

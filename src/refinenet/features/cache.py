@@ -20,7 +20,7 @@ from refinenet.data import io
 from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError
 from refinenet.estimators.baselines import fit_normals
-from refinenet.estimators.smooth_jet import smooth_jet_normals
+from refinenet.estimators.smooth_jet import JET_K, smooth_jet_normals
 from refinenet.features.filtering import bilateral_filter
 from refinenet.features.heightmaps import height_maps
 from refinenet.geometry.frames import normal_frames, target_sign
@@ -78,35 +78,47 @@ class Features:
 
 def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: FeatureConfig,
                      progress: bool = False, length: float | None = None,
-                     centres: np.ndarray | None = None, workers: int = 1, noise: float | None = None) -> Features:
+                     centres: np.ndarray | None = None, workers: int = 1, noise: float | None = None,
+                     neighbours: np.ndarray | None = None) -> Features:
     """Stages B, C and F for one cloud: filtered normals, frames, then height maps (the slow part).
 
     `length` is l_d, the unit of r_f and hmp_extent (default: the bounding-box diagonal; `geometry.scale`).
     `centres` limits the rows to those points (a tile's own points; its margin only lends neighbours).
     `workers` threads build the height maps (numpy releases the GIL); each map depends on its point alone, so
     the result does not depend on it. `noise` is the whole cloud's for a tile (`FeatureConfig.smooth_jet`).
+    `neighbours` are the points' kNN lists, when the caller shares them (`neighbors.neighbour_lists`), at least
+    `neighbour_width(config)` wide.
     """
     points = np.asarray(points, dtype=np.float64)
     if config.smooth_jet is not None:
         with stage("smooth jet"):
-            initial_normals = smooth_jet_normals(points, initial_normals, config.smooth_jet, noise)
+            initial_normals = smooth_jet_normals(points, initial_normals, config.smooth_jet, noise, neighbours)
     length = bbox_diagonal(points) if length is None else length
     rows = np.arange(len(points)) if centres is None else np.asarray(centres)
     with stage("filtered normals"):
         nf = bilateral_filter(points, initial_normals, r_f=config.r_f, sigma_s=config.sigma_s,
                               sigma_r=config.sigma_r, include_initial=config.include_initial, length=length)
-        nf = np.hstack([nf, *(wide_normals(points, nf[:, :3], method, k) for method, k in config.wide_normals)])
+        nf = np.hstack([nf, *(wide_normals(points, nf[:, :3], method, k, neighbours)
+                              for method, k in config.wide_normals)])
         frames = normal_frames(nf, config.frame_mode)
     with stage("height maps"):
-        heights = _height_maps(points, nf, frames, config, length, rows, workers, progress)
+        heights = _height_maps(points, nf, frames, config, length, rows, workers, progress,
+                               None if neighbours is None else neighbours[rows])
     return Features(nf=nf[rows], frames=frames[rows].astype(np.float32), heights=heights,
                     centres=None if centres is None else rows)
 
 
+def neighbour_width(config: FeatureConfig) -> int:
+    """The widest kNN list the features take (0: none): the smooth-point jet's, the wide jet's and rho's."""
+    return max([JET_K if config.smooth_jet is not None else 0, config.hmp_k if config.hmp_extent is None else 0,
+                *(k for method, k in config.wide_normals if method == "jet")])
+
+
 def _height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, config: FeatureConfig, length: float,
-                 rows: np.ndarray, workers: int, progress: bool) -> np.ndarray:
-    """Stage F for the points `rows`, in steps of HEIGHT_STEP points over `workers` threads."""
-    tree = build_tree(points)
+                 rows: np.ndarray, workers: int, progress: bool, neighbours: np.ndarray | None) -> np.ndarray:
+    """Stage F for the points `rows` (whose kNN lists are `neighbours`, if shared), in steps of HEIGHT_STEP points
+    over `workers` threads."""
+    tree = build_tree(points) if neighbours is None and config.hmp_extent is None else None
     extent = None if config.hmp_extent is None else config.hmp_extent * length
     heights = np.empty((len(rows), config.n_normals, config.hmp_size, config.hmp_size), dtype=config.heights_dtype)
 
@@ -114,18 +126,21 @@ def _height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, config:
     with tqdm(total=len(steps), desc="height maps", disable=not progress) as bar:
         def fill(part: slice) -> None:
             heights[part] = height_maps(points, nf, frames, m=config.hmp_size, k=config.hmp_k, extent=extent,
-                                        tree=tree, index=rows[part])
+                                        tree=tree, index=rows[part],
+                                        neighbours=None if neighbours is None else neighbours[part])
             bar.update()
 
         thread_map(fill, steps, workers)
     return heights
 
 
-def wide_normals(points: np.ndarray, n_first: np.ndarray, method: str, k: int) -> np.ndarray:
+def wide_normals(points: np.ndarray, n_first: np.ndarray, method: str, k: int,
+                 neighbours: np.ndarray | None = None) -> np.ndarray:
     """(N, 3) float32 normals of a wide-neighbourhood fit (`FeatureConfig.wide_normals`: PCA, or a degree-2 jet, of
     k neighbours), each flipped to its n_first's side as the filtered normals are, so that the extra normal carries
-    no sign of its own."""
-    return target_sign(fit_normals(points, method, min(k, len(points))).astype(np.float32), n_first)
+    no sign of its own. `neighbours`: the points' kNN lists, if shared."""
+    normals = fit_normals(points, method, min(k, len(points)), neighbours=neighbours)
+    return target_sign(normals.astype(np.float32), n_first)
 
 
 def save_features(path: str | Path, features: Features, meta: dict[str, Any]) -> None:

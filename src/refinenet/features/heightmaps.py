@@ -29,7 +29,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from refinenet.geometry.ball import ball_grid
-from refinenet.geometry.neighbors import build_tree, knn
+from refinenet.geometry.neighbors import build_tree, farthest_distance, first_neighbours, knn
 
 #: Bin ball radius in cells.
 BIN_RADIUS = 0.9
@@ -42,18 +42,21 @@ DEGENERATE = 1e-12
 
 def height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, m: int = 7, k: int = 100,
                 extent: float | np.ndarray | None = None, tree: cKDTree | None = None,
-                index: np.ndarray | None = None) -> np.ndarray:
+                index: np.ndarray | None = None, neighbours: np.ndarray | None = None) -> np.ndarray:
     """Height maps (M x X x m x m, float32) of points[index] (all when None), one per normal of `nf` (N x 3X).
 
     rho_i (the half-extent) is the distance to the k-th nearest neighbour (self included), or `extent`: an
     absolute length, scalar or one per indexed point (e.g. the paper profile's ball radius, or rho computed
-    once for the patches). `frames` (N x 3 x 3) are the §4 frames of the whole cloud. Normals are renormalised.
+    once for the patches). `neighbours` (M x k or wider), the indexed points' kNN lists when the caller shares
+    them, give that k-th neighbour without a query. `frames` (N x 3 x 3) are the §4 frames of the whole cloud.
+    Normals are renormalised.
     """
     points = np.asarray(points, dtype=np.float64)
     index = np.arange(len(points)) if index is None else np.asarray(index)
-    tree = tree if tree is not None else build_tree(points)
-    if extent is None:
-        rho = knn(points, k, tree=tree, query=points[index])[0][:, -1]
+    if extent is None and neighbours is not None:
+        rho = farthest_distance(points, points[index], first_neighbours(neighbours, k))
+    elif extent is None:
+        rho = knn(points, k, tree=tree if tree is not None else build_tree(points), query=points[index])[0][:, -1]
     else:
         rho = np.broadcast_to(np.asarray(extent, dtype=np.float64), (len(index),))
     half = m // 2

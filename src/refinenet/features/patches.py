@@ -17,23 +17,27 @@ from scipy.spatial import cKDTree
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.ball import BallGrid, ball_grid, random_ball_subsets
 from refinenet.geometry.frames import to_local
-from refinenet.geometry.neighbors import build_tree, chunks, knn
+from refinenet.geometry.neighbors import build_tree, chunks, farthest_distance, first_neighbours, knn
 
 
 def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: int = 100, radius: float = 0.05,
                   max_points: int = 300, rng: np.random.Generator | None = None, frames: np.ndarray | None = None,
                   index: np.ndarray | None = None, tree: cKDTree | None = None, length: float | None = None,
-                  grid: BallGrid | None = None) -> np.ndarray:
+                  grid: BallGrid | None = None, neighbours: np.ndarray | None = None) -> np.ndarray:
     """Patches (M x P x 3, float32) around points[index] (all points when None); P = k or max_points.
 
     knn: the k nearest points (self included), divided by the distance to the k-th. ball: radius is a fraction of
     l_d (`length`, by default the bounding-box diagonal); a new random subset is drawn from `rng` on each call.
     `frames` (M x 3 x 3, those of the indexed points) rotates each patch into its point's frame. `tree` (knn) and
-    `grid` (ball, built for the ball's radius) are the cloud's search structures, when the caller keeps them.
+    `grid` (ball, built for the ball's radius) are the cloud's search structures, when the caller keeps them;
+    `neighbours` (M x k or wider), the indexed points' kNN lists, when the caller shares them (knn).
     """
     points = np.asarray(points, dtype=np.float64)
     index = np.arange(len(points)) if index is None else np.asarray(index)
-    if mode == "knn":
+    if mode == "knn" and neighbours is not None:
+        idx = first_neighbours(neighbours, k)
+        scale = farthest_distance(points, points[index], idx)
+    elif mode == "knn":
         dist, idx = knn(points, k, tree=tree if tree is not None else build_tree(points), query=points[index])
         scale = dist[:, -1]
     elif mode == "ball":

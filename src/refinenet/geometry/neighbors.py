@@ -52,6 +52,24 @@ def knn(points: np.ndarray, k: int, tree: cKDTree | None = None, query: np.ndarr
     return dist, idx
 
 
+def neighbour_lists(points: np.ndarray, k: int) -> np.ndarray:
+    """kNN_k of every point as int32 (closest first, self included), without distances, which halves the memory:
+    the lists a chain of stages shares, each taking the first k' <= k columns (`first_neighbours`)."""
+    return knn(points, k, with_distances=False, index_dtype=np.int32)[1]
+
+
+def first_neighbours(neighbours: np.ndarray, k: int) -> np.ndarray:
+    """The first k columns of shared kNN lists: the kNN_k lists themselves (ties at the k-th aside)."""
+    if neighbours.shape[1] < k:
+        raise ValueError(f"kNN lists of {neighbours.shape[1]} neighbours, {k} needed")
+    return neighbours[:, :k]
+
+
+def farthest_distance(points: np.ndarray, query: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
+    """The distance from each query point to the last of its neighbours (M, k): `knn`'s last distance, to the bit."""
+    return np.sqrt(np.square(points[neighbours[:, -1]] - query).sum(axis=1))
+
+
 def _grid_for(points: np.ndarray, k: int, tree: cKDTree, n_queries: int) -> Grid | None:
     """A grid for kNN_k on `points` when `n_queries` queries repay its sort of the cloud, else None."""
     return build_grid(points, k, tree) if n_queries >= max(GRID_MIN_QUERIES, len(points) // 4) else None

@@ -53,6 +53,9 @@ class PreparedCloud:
     """(M,) the point of each feature row; None: every point, in order."""
     length: float | None = None
     """l_d of ball patches (`geometry.scale`); None: the bounding-box diagonal of `points`."""
+    neighbours: np.ndarray | None = None
+    """(M, k or wider) the centres' kNN lists, when the caller has them (`neighbors.neighbour_lists`): knn patches
+    then need no query."""
     tree: cKDTree = field(init=False, repr=False)
     _ball: BallGrid | None = field(default=None, init=False, repr=False)
 
@@ -61,9 +64,11 @@ class PreparedCloud:
         self.clusters = np.asarray(self.clusters)
         self.centres = np.arange(len(self.points)) if self.centres is None else np.asarray(self.centres)
         m = len(self.centres)
-        if self.points.shape != (len(self.points), 3) or len(self.features) != m or self.clusters.shape != (m,):
+        if self.points.shape != (len(self.points), 3) or len(self.features) != m or self.clusters.shape != (m,) \
+                or (self.neighbours is not None and len(self.neighbours) != m):
             raise ValueError(f"inconsistent cloud: points {self.points.shape}, {m} centres, {len(self.features)} "
-                             f"feature rows, clusters {self.clusters.shape}")
+                             f"feature rows, clusters {self.clusters.shape}"
+                             + ("" if self.neighbours is None else f", neighbours {self.neighbours.shape}"))
         if self.normals is not None:
             normals = np.asarray(self.normals, dtype=np.float32)
             if normals.shape != (m, 3):
@@ -80,10 +85,11 @@ class PreparedCloud:
 
 
 def prepare(points: np.ndarray, features: Features, model: ClusterModel, normals: np.ndarray | None = None,
-            centres: np.ndarray | None = None, length: float | None = None) -> PreparedCloud:
+            centres: np.ndarray | None = None, length: float | None = None,
+            neighbours: np.ndarray | None = None) -> PreparedCloud:
     """A cloud ready for training (with ground-truth `normals`) or inference: its centres assigned to clusters."""
     return PreparedCloud(points, features, cloud_clusters(model, features.nf, features.frames), normals, centres,
-                         length)
+                         length, neighbours)
 
 
 @dataclass(frozen=True)
@@ -131,7 +137,8 @@ def make_inputs(cloud: PreparedCloud, index: np.ndarray, patch: PatchConfig, net
         grid = cloud.ball_grid(patch.radius * cloud.length) if patch.mode == "ball" else None
         points = point_patches(cloud.points, patch.mode, k=patch.k, radius=patch.radius,
                                max_points=patch.max_points, rng=rng, frames=frames, index=cloud.centres[index],
-                               tree=cloud.tree, length=cloud.length, grid=grid)
+                               tree=cloud.tree, length=cloud.length, grid=grid,
+                               neighbours=None if cloud.neighbours is None else cloud.neighbours[index])
     heights = features.heights[index].astype(np.float32) if network.uses_hmps else None
     target = None
     if cloud.normals is not None:

@@ -31,13 +31,15 @@ from refinenet.threads import native_threads
 
 def refine_normals(points: np.ndarray, features: Features, cluster_model: ClusterModel,
                    networks: Mapping[int, RefineNet], patch: PatchConfig, config: InferenceConfig, seed: int = 0,
-                   progress: bool = False, length: float | None = None) -> np.ndarray:
+                   progress: bool = False, length: float | None = None,
+                   neighbours: np.ndarray | None = None) -> np.ndarray:
     """(M, 3) float32 unit normals in the world frame, one per feature row (of the point `features.points` names).
 
     Each point goes through the network of its cluster (`networks` maps cluster id -> network, which is moved to
     `device` and put in eval mode); a cluster without a network (trained as empty) keeps the first normal of nf.
     `patch` must match the training patches; `seed` draws the ball-mode subsets. `length` is the l_d of ball
-    patches (`dataset.PreparedCloud`). On a CPU the batches run side by side, one per thread (`_BatchRunner`).
+    patches (`dataset.PreparedCloud`), and `neighbours` the kNN lists of the feature rows' points, if the caller
+    has them. On a CPU the batches run side by side, one per thread (`_BatchRunner`).
     """
     device, batch_size = resolve_device(config.device), config.batch_size
     if batch_size < 1:
@@ -46,7 +48,8 @@ def refine_normals(points: np.ndarray, features: Features, cluster_model: Cluste
     if unknown:
         raise ValueError(f"networks for clusters {unknown}, but the cluster model has {cluster_model.n_clusters}")
     with stage("patches"):
-        cloud = prepare(points, features, cluster_model, centres=features.centres, length=length)
+        cloud = prepare(points, features, cluster_model, centres=features.centres, length=length,
+                        neighbours=neighbours)
     normals = features.n_first.astype(np.float32)
     rng = np.random.default_rng(seed)
     members = {c: np.flatnonzero(cloud.clusters == c) for c in sorted(networks)}
