@@ -79,7 +79,8 @@ def network_flops_per_point() -> float:
     points, _ = noisy_cloud(FLOP_POINTS)
     release = load_release(SHIPPED)
     # One thread, so that the batches run on this one, where the counter (a per-thread mode) sees them.
-    fused = {torch.ops.mkldnn._linear_pointwise: _linear_flops}  # `model.LinearReLU`, which torch does not count
+    fused = {torch.ops.mkldnn._linear_pointwise: _linear_flops,  # `model.LinearReLU` and `model.Conv2dReLU`,
+             torch.ops.mkldnn._convolution_pointwise: _convolution_flops}  # which torch does not count
     counter = FlopCounterMode(display=False, custom_mapping=fused)
     with mock.patch.dict(os.environ, {VARIABLES[0]: "1"}), counter:
         estimate_normals(points, release, n_strata=1, device="cpu")
@@ -89,6 +90,11 @@ def network_flops_per_point() -> float:
 def _linear_flops(x_shape, w_shape, *args, out_shape=None, **kwargs) -> int:
     """Of a product of rows x_shape (..., in) by the weight w_shape (out, in)."""
     return 2 * math.prod(x_shape) * w_shape[0]
+
+
+def _convolution_flops(x_shape, w_shape, *args, out_shape=None, **kwargs) -> int:
+    """Of a convolution by the weight w_shape (out, in / groups, kh, kw) giving out_shape."""
+    return 2 * math.prod(out_shape) * math.prod(w_shape[1:])
 
 
 def _seconds(fn) -> float:
