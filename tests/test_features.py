@@ -16,9 +16,9 @@ from refinenet.data.noise import bbox_diagonal
 from refinenet.errors import InputError, ParamsError
 from refinenet.features.cache import (
     compute_features,
+    features_width,
     load_features,
     load_for_cloud,
-    neighbour_width,
     save_features,
 )
 from refinenet.features.heightmaps import height_maps
@@ -110,14 +110,14 @@ def test_features_from_shared_lists_equal_those_of_their_own_queries(cube, smoot
     bit for bit, for every point or for some rows."""
     points, _, initial = cube
     config = feature_config(smooth_jet=smooth_jet, jet_k=jet_k, pca_k=100)
-    lists = neighbour_lists(points, neighbour_width(config))
+    lists = neighbour_lists(points, features_width(config))
     rows = np.arange(5, len(points), 3)
     for centres in (None, rows):
         shared = compute_features(points, initial, config, centres=centres, neighbours=lists)
         own = compute_features(points, initial, config, centres=centres)
         for name in ("nf", "frames", "heights"):
             np.testing.assert_array_equal(getattr(shared, name), getattr(own, name))
-    assert neighbour_width(config) == (100 if smooth_jet else config.hmp_k)
+    assert features_width(config) == (100 if smooth_jet else config.hmp_k)
 
 
 def test_round_trip(tmp_path, cube):

@@ -153,8 +153,9 @@ def test_shared_lists_give_each_narrower_knn_and_its_last_distance(grid_everywhe
     assert lists.dtype == np.int32
     for k in (10, 25, 40):
         dist, idx = neighbors.knn(points, k)
-        first = neighbors.first_neighbours(lists, k)
+        np.testing.assert_array_equal(neighbors.first_neighbours(lists, k), idx)
+        last, first = neighbors.nearest_at(points, k, np.arange(len(points)), neighbours=lists)
         np.testing.assert_array_equal(first, idx)
-        np.testing.assert_array_equal(neighbors.farthest_distance(points, points, first), dist[:, -1])
+        np.testing.assert_array_equal(last, dist[:, -1])
     with pytest.raises(ValueError, match="lists of 40 neighbours, 41 needed"):
         neighbors.first_neighbours(lists, 41)

@@ -21,8 +21,7 @@ from refinenet.estimators.baselines import baseline_normals, neighbourhood_size
 from refinenet.estimators.mfps import Candidacy, cloud_candidacy, mfps_normals, point_variation
 from refinenet.estimators.smooth_jet import point_noise
 from refinenet.estimators.strata import consensus, consensus_k, strata, strata_needed
-from refinenet.features.cache import compute_features
-from refinenet.features.cache import neighbour_width as features_width
+from refinenet.features.cache import compute_features, features_width
 from refinenet.geometry.neighbors import build_tree, neighbour_lists
 from refinenet.geometry.scale import neighbour_distance, spacing_unit
 from refinenet.geometry.tiles import Tile, tiles

@@ -480,10 +480,11 @@ def mfps_and_simple_normals(points: np.ndarray, config: MFPSConfig, progress: bo
     def step(name: str, total: int = 1) -> AbstractContextManager[tqdm]:
         return _step(name, total, progress)
 
+    width = max(k_max, k_bw)
     if neighbours is None:
         with step("kNN", len(points)):
-            neighbours = neighbour_lists(points, max(k_max, k_bw))
-    neighbours = first_neighbours(neighbours, max(k_max, k_bw))
+            neighbours = neighbour_lists(points, width)
+    neighbours = first_neighbours(neighbours, width)
     with step("A.1 candidates"):
         centroids, covs = covariances(points, neighbours[:, :k0])
         eigenvalues, normals = smallest_eigenvectors(covs)

@@ -87,7 +87,7 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
     `workers` threads build the height maps (numpy releases the GIL); each map depends on its point alone, so
     the result does not depend on it. `noise` is the whole cloud's for a tile (`FeatureConfig.smooth_jet`).
     `neighbours` are the points' kNN lists, when the caller shares them (`neighbors.neighbour_lists`), at least
-    `neighbour_width(config)` wide.
+    `features_width(config)` wide.
     """
     points = np.asarray(points, dtype=np.float64)
     if config.smooth_jet is not None:
@@ -108,7 +108,7 @@ def compute_features(points: np.ndarray, initial_normals: np.ndarray, config: Fe
                     centres=None if centres is None else rows)
 
 
-def neighbour_width(config: FeatureConfig) -> int:
+def features_width(config: FeatureConfig) -> int:
     """The widest kNN list the features take (0: none): the smooth-point jet's, the wide jet's and rho's."""
     return max([JET_K if config.smooth_jet is not None else 0, config.hmp_k if config.hmp_extent is None else 0,
                 *(k for method, k in config.wide_normals if method == "jet")])

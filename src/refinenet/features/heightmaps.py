@@ -29,7 +29,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from refinenet.geometry.ball import ball_grid
-from refinenet.geometry.neighbors import build_tree, farthest_distance, first_neighbours, knn
+from refinenet.geometry.neighbors import nearest_at
 
 #: Bin ball radius in cells.
 BIN_RADIUS = 0.9
@@ -53,10 +53,8 @@ def height_maps(points: np.ndarray, nf: np.ndarray, frames: np.ndarray, m: int =
     """
     points = np.asarray(points, dtype=np.float64)
     index = np.arange(len(points)) if index is None else np.asarray(index)
-    if extent is None and neighbours is not None:
-        rho = farthest_distance(points, points[index], first_neighbours(neighbours, k))
-    elif extent is None:
-        rho = knn(points, k, tree=tree if tree is not None else build_tree(points), query=points[index])[0][:, -1]
+    if extent is None:
+        rho = nearest_at(points, k, index, tree, neighbours)[0]
     else:
         rho = np.broadcast_to(np.asarray(extent, dtype=np.float64), (len(index),))
     half = m // 2

@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from refinenet.data.noise import bbox_diagonal
 from refinenet.geometry.ball import BallGrid, ball_grid, random_ball_subsets
 from refinenet.geometry.frames import to_local
-from refinenet.geometry.neighbors import build_tree, chunks, farthest_distance, first_neighbours, knn
+from refinenet.geometry.neighbors import chunks, nearest_at
 
 
 def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: int = 100, radius: float = 0.05,
@@ -34,12 +34,8 @@ def point_patches(points: np.ndarray, mode: Literal["knn", "ball"] = "knn", k: i
     """
     points = np.asarray(points, dtype=np.float64)
     index = np.arange(len(points)) if index is None else np.asarray(index)
-    if mode == "knn" and neighbours is not None:
-        idx = first_neighbours(neighbours, k)
-        scale = farthest_distance(points, points[index], idx)
-    elif mode == "knn":
-        dist, idx = knn(points, k, tree=tree if tree is not None else build_tree(points), query=points[index])
-        scale = dist[:, -1]
+    if mode == "knn":
+        scale, idx = nearest_at(points, k, index, tree, neighbours)
     elif mode == "ball":
         ball = radius * (bbox_diagonal(points) if length is None else length)
         grid = grid if grid is not None and grid.radius == ball else ball_grid(points, ball)

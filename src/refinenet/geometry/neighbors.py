@@ -65,9 +65,15 @@ def first_neighbours(neighbours: np.ndarray, k: int) -> np.ndarray:
     return neighbours[:, :k]
 
 
-def farthest_distance(points: np.ndarray, query: np.ndarray, neighbours: np.ndarray) -> np.ndarray:
-    """The distance from each query point to the last of its neighbours (M, k): `knn`'s last distance, to the bit."""
-    return np.sqrt(np.square(points[neighbours[:, -1]] - query).sum(axis=1))
+def nearest_at(points: np.ndarray, k: int, index: np.ndarray, tree: cKDTree | None = None,
+               neighbours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The distance to the k-th nearest neighbour (M,) and kNN_k (M, k) of points[index]: from `neighbours`, their
+    shared lists (the distance recomputed as `knn` gives it, to the bit), else from a query."""
+    if neighbours is None:
+        dist, idx = knn(points, k, tree=tree, query=points[index])
+        return dist[:, -1], idx
+    idx = first_neighbours(neighbours, k)
+    return np.sqrt(np.square(points[idx[:, -1]] - points[index]).sum(axis=1)), idx
 
 
 def _grid_for(points: np.ndarray, k: int, tree: cKDTree, n_queries: int) -> Grid | None:
