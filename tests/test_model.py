@@ -162,15 +162,15 @@ def test_fused_copy_for_inference_gives_the_same_normals():
     assert count_parameters(model) == 2_648_131  # the original is left as it was
 
 
-def test_reduced_precision_copy_computes_the_feature_convolutions_in_bfloat16():
+def test_reduced_precision_copy_computes_the_feature_modules_in_bfloat16():
     torch.manual_seed(0)
     model = RefineNet(preset("release")).eval()
     reduced = reduced_precision(model, "bfloat16")
     dtypes = {name: p.dtype for name, p in reduced.named_parameters()}
     low = {name for name, dtype in dtypes.items() if dtype == torch.bfloat16}
-    assert low and all(name.startswith(("point_module.mlp.", "height_map_module.")) for name in low)
-    assert dtypes["height_map_module.0.weight"] == torch.bfloat16  # first convolution
-    assert dtypes[f"height_map_module.{reduced.height_map_module.n_convolutional + 1}.weight"] == torch.float32
+    assert low == {name for name in dtypes if name.startswith(("point_module.", "height_map_module."))}
+    assert dtypes["point_module.fc.0.weight"] == dtypes["height_map_module.0.weight"] == torch.bfloat16
+    assert dtypes["output_module.1.weight"] == torch.float32
     assert all(p.dtype == torch.float32 for p in model.parameters())  # the original is left as it was
     assert reduced_precision(model, "float32") is model
     inputs = _inputs(model.config, 64)

@@ -331,8 +331,8 @@ class InferenceConfig:
     device: str
     """auto (cuda when torch sees a GPU), cpu or cuda."""
     precision: str
-    """Of the point MLP and height-map convolutions (`model.reduced_precision`): float32, bfloat16, or auto
-    (bfloat16 on a CPU with native bfloat16)."""
+    """Of the networks' feature modules, the point and height-map modules (`model.reduced_precision`): float32,
+    bfloat16, or auto (bfloat16 on a CPU with native bfloat16)."""
     points: int | None
     """The pipeline's test clouds: refine only a seeded subset of this many points of each, which the tables then
     score (`data.clouds.scored_points`); None: every point. `variant_budget` sets it for the variants."""

@@ -180,7 +180,7 @@ def _network_options(command: argparse.ArgumentParser) -> None:
     command.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
                          help="where the networks run (auto: CUDA when present)")
     command.add_argument("--precision", default="auto", choices=("auto", "float32", "bfloat16"),
-                         help="of the networks' point MLP and height-map convolutions (auto: bfloat16 on a CPU that "
+                         help="of the networks' feature modules (auto: bfloat16 on a CPU that "
                               "computes it natively: about 1.5x faster, the mean error within 0.01 deg; else "
                               "float32, the pipeline's)")
     _threads_option(command)

@@ -189,8 +189,8 @@ class PointModule(nn.Module):
         """Patches the MLP and max-pool take at a time (None: the whole batch); set by `inference_layout`."""
 
     def forward(self, points: Tensor) -> Tensor:
-        # The MLP may compute in a lower precision than the head (`reduced_precision`); the max-pool is exact in
-        # any precision, so the cast back follows it, on B x 1024 values rather than B x P x 1024.
+        # The module may compute in a lower precision (`reduced_precision`); its output goes on in the input's.
+        dtype = points.dtype
         points = points.to(self.mlp[0].weight.dtype)
         if self.plain_pooling:
             pooled = self.mlp(points).amax(dim=1)
@@ -198,7 +198,7 @@ class PointModule(nn.Module):
             pooled = self._pooled(points)
         else:
             pooled = torch.cat([self._pooled(part) for part in points.split(self.chunk)])
-        return self.fc(pooled.to(self.fc[0].weight.dtype))
+        return self.fc(pooled.to(self.fc[0].weight.dtype)).to(dtype)
 
     def _pooled(self, points: Tensor) -> Tensor:
         return max_pool_linear_bn(self.mlp[:-2](points), self.mlp[-2], self.mlp[-1])
@@ -226,13 +226,11 @@ class HeightMapModule(nn.Sequential):
         """Of the maps through the convolutions; set by `inference_layout`."""
 
     def forward(self, heights: Tensor) -> Tensor:
-        # The convolutions may compute in a lower precision than the FC head (`reduced_precision`).
+        # The module may compute in a lower precision (`reduced_precision`); its output goes on in the input's.
         x = heights.to(self[0].weight.dtype).contiguous(memory_format=self.memory_format)
-        for i, layer in enumerate(self):
-            if i == self.n_convolutional:
-                x = x.to(self[-1].weight.dtype)
+        for layer in self:
             x = layer(x)
-        return x
+        return x.to(heights.dtype)
 
 
 class Refinement(nn.Module):
@@ -491,19 +489,19 @@ def _fold_batch_norm(model: RefineNet) -> RefineNet:
     return model
 
 
-#: Inference precisions of the feature modules' convolutional parts (`reduced_precision`).
+#: Inference precisions of the feature modules (`reduced_precision`).
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
 
 def reduced_precision(model: RefineNet, precision: str) -> RefineNet:
-    """An inference copy whose point MLP and height-map convolutions compute in `precision`; the rest stays
-    float32.
+    """An inference copy whose feature modules (the point module and the height-map module, FC heads included)
+    compute in `precision`; the connection and output modules stay float32.
 
-    Those two parts hold about 85% of the multiply-adds of a point, and where the CPU has native bfloat16
-    (AVX512-BF16, AMX) they run about twice as fast in it. Their outputs are max-pooled or pass through the FC
-    heads, which absorb the rounding: over 100k points of a CAD shape the normals move by 0.02 deg on average
-    and the mean error by about 0.001 deg (benchmarks/results/cli.md). The connection and output modules, where
-    bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
+    The feature modules hold about 95% of the multiply-adds of a point, and where the CPU has native bfloat16
+    (AVX512-BF16, AMX) they run about twice as fast in it. Their outputs pass through the connections and the
+    output module, which absorb the rounding: over 100k points of a CAD shape the normals move by about 0.02 deg on
+    average and the mean error by about 0.001 deg (benchmarks/results/cli.md). The connection and output modules,
+    where bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
     """
     _check_precision(precision)
     return model if precision == "float32" else _set_precision(copy.deepcopy(model).eval(), precision)
@@ -640,12 +638,9 @@ def _check_precision(precision: str) -> None:
 
 
 def _set_precision(model: RefineNet, precision: str) -> RefineNet:
-    dtype = PRECISIONS[precision]
-    if model.point_module is not None:
-        model.point_module.mlp.to(dtype)
-    if model.height_map_module is not None:
-        for layer in list(model.height_map_module)[:model.height_map_module.n_convolutional]:
-            layer.to(dtype)
+    for module in (model.point_module, model.height_map_module):
+        if module is not None:
+            module.to(PRECISIONS[precision])
     return model
 
 
