@@ -497,11 +497,11 @@ def reduced_precision(model: RefineNet, precision: str) -> RefineNet:
     """An inference copy whose feature modules (the point module and the height-map module, FC heads included)
     compute in `precision`; the connection and output modules stay float32.
 
-    The feature modules hold about 95% of the multiply-adds of a point, and where the CPU has native bfloat16
+    The feature modules hold about 97% of the multiply-adds of a point, and where the CPU has native bfloat16
     (AVX512-BF16, AMX) they run about twice as fast in it. Their outputs pass through the connections and the
-    output module, which absorb the rounding: over 100k points of a CAD shape the normals move by about 0.02 deg on
-    average and the mean error by about 0.001 deg (benchmarks/results/cli.md). The connection and output modules,
-    where bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
+    output module, which absorb the rounding: over 100k points of a CAD shape the normals move from float32's by
+    0.003 deg on average and the mean error by 0.0005 deg (benchmarks/results/cli.md). The connection and output
+    modules, where bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
     """
     _check_precision(precision)
     return model if precision == "float32" else _set_precision(copy.deepcopy(model).eval(), precision)
