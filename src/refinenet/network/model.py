@@ -198,7 +198,7 @@ class PointModule(nn.Module):
             pooled = self._pooled(points)
         else:
             pooled = torch.cat([self._pooled(part) for part in points.split(self.chunk)])
-        return self.fc(pooled.to(self.fc[0].weight.dtype)).to(dtype)
+        return self.fc(pooled).to(dtype)
 
     def _pooled(self, points: Tensor) -> Tensor:
         return max_pool_linear_bn(self.mlp[:-2](points), self.mlp[-2], self.mlp[-1])
