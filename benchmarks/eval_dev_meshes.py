@@ -24,14 +24,18 @@ protocol (`refinenet.evaluation.table.aggregate`: pooled mean and PGP, point-wei
 "Near edges" are the points whose 10 nearest clean-sample neighbours include a ground-truth normal more than 30
 degrees away.
 
-    python benchmarks/eval_dev_meshes.py [--points 100000] [--threads 2] [--methods refinenet]
+    python benchmarks/eval_dev_meshes.py [--points 50000 100000] [--threads 2] [--methods refinenet]
                                          [--disne DISNE_FOLDER] [--release FOLDER --out DIR]
 
-The report has the tables per category, per noise level and per cloud, each method's wall seconds per 100,000
-points, and a plot of the mean error against the noise level per method and category (dev_meshes.png).
+Each cloud size (`--points`, by default 50,000 and 100,000) is a run of its own, with its own record in
+dev_meshes.json (keyed by the size): a run replaces its size's record and keeps the others'. The report has, per
+size, the tables per category, per noise level and per cloud and each method's wall seconds per 100,000 points, and
+a plot of the mean error against the noise level per method and category, one row of panels per size
+(dev_meshes.png).
 
 `--methods` reruns only some methods (after a change to Refine-Net, say) and keeps the other methods' rows from
-the committed run (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh and the level.
+the committed run of the same size (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh
+and the level.
 
 `--release` evaluates another run's exported networks (its `src/refinenet/shipped` after `snakemake -j2 release`,
 e.g. a candidate setting's) in place of the shipped ones; its results go under `--out`, a folder outside
@@ -92,6 +96,8 @@ DEV = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "meshes" 
 FOLDERS = {"sharp": "SharpFeature", "smooth": "SmoothSurface", "rich": "RichFeature"}
 BIG_NOISE = "BigNoise"
 GLOBAL_SEED = 2022
+#: The cloud sizes of a default run (points per cloud).
+SIZES = (50_000, 100_000)
 METRICS = ("mean", "rmse", "pgp5", "pgp10")
 PCA_KS = (30, 50, 100)
 PCA_BEST = "pca_best"
@@ -257,67 +263,90 @@ def markdown_table(frame: pd.DataFrame, formats: dict[str, str]) -> list[str]:
     return lines
 
 
-def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame) -> str:
-    info, levels = record["machine"], PARAMS.noise.test
-    per_category = record["verdicts"]
-    met = [c for c, v in per_category.items() if v["met"]]
+def markdown(runs: list[tuple[dict, pd.DataFrame, pd.DataFrame]]) -> str:
+    """The report of every size's run (its record, per-cloud rows and category table; smallest size first): the
+    verdicts first, then one section per size."""
+    levels = PARAMS.noise.test
     lines = [
         "# Normal estimation on the shared development meshes",
         "",
-        f"Requirement: {record['requirement']}",
+        f"Requirement: {runs[0][0]['requirement']}",
         "",
-        f"**Refine-Net below {', '.join(NAMES[r] for r in record['rivals'])} in mean and RMSE in {len(met)} of "
-        f"{len(per_category)} categories" + (f" ({', '.join(met)})" if met else "") + ".** " + record["mfps_verdict"]
-        + (f" Not run: {'; '.join(f'{NAMES[m]} ({why})' for m, why in record['not_run'].items())}."
-           if record["not_run"] else ""),
-        "",
-        f"Every mesh of `../shared/data/meshes/dev` is sampled with {record['points']:,} area-uniform points "
-        "(ground truth: face normals) and perturbed with Gaussian noise in percent of the bounding-box diagonal: "
+    ]
+    for record, _, _ in runs:
+        met = [c for c, v in record["verdicts"].items() if v["met"]]
+        lines += [
+            f"**At {record['points']:,} points: Refine-Net below {', '.join(NAMES[r] for r in record['rivals'])} in "
+            f"mean and RMSE in {len(met)} of {len(record['verdicts'])} categories"
+            + (f" ({', '.join(met)})" if met else "") + ".** " + record["mfps_verdict"]
+            + (f" Not run: {'; '.join(f'{NAMES[m]} ({why})' for m, why in record['not_run'].items())}."
+               if record["not_run"] else ""),
+            "",
+        ]
+    sizes = " and ".join(f"{record['points']:,}" for record, _, _ in runs)
+    lines += [
+        f"Every mesh of `../shared/data/meshes/dev` is sampled with {sizes} area-uniform points (ground truth: "
+        "face normals; each size a run of its own) and perturbed with Gaussian "
+        "noise in percent of the bounding-box diagonal: "
         + "; ".join(f"the {folder} meshes at {category}'s levels {', '.join(map(str, levels[category]))}"
                     for folder, category in FOLDERS.items())
         + f"; and every mesh at {BIG_NOISE}'s levels {', '.join(map(str, levels[BIG_NOISE]))}. Seeds from "
         f"`derive_seed({GLOBAL_SEED}, ...)` (in {STEM}.json). PCA: k = {', '.join(map(str, PCA_KS))} and per "
-        "category the k of lowest mean error (chosen: "
-        + ", ".join(f"{c} {k}" for c, k in record["pca_best_k"].items())
-        + f"); Jet: k = {PARAMS.baselines.jet_k} ({PARAMS.baselines.big_noise_k} on BigNoise), degree "
-        f"{PARAMS.baselines.jet_degree}; MFPS: params.yaml's (K = {{{', '.join(map(str, PARAMS.mfps.scales))}}}, "
-        f"R = {PARAMS.mfps.trials}, theta_t = {PARAMS.mfps.theta_t} deg, eta = {PARAMS.mfps.eta}); Refine-Net: "
-        + ("the networks shipped with the package" if record["release_shipped"] else
-           "another run's exported networks (`--release`; not the shipped ones)")
+        f"category the k of lowest mean error; Jet: k = {PARAMS.baselines.jet_k} ({PARAMS.baselines.big_noise_k} on "
+        f"BigNoise), degree {PARAMS.baselines.jet_degree}; MFPS: params.yaml's (K = "
+        f"{{{', '.join(map(str, PARAMS.mfps.scales))}}}, R = {PARAMS.mfps.trials}, theta_t = {PARAMS.mfps.theta_t} "
+        f"deg, eta = {PARAMS.mfps.eta}); Refine-Net: networks trained on the procedural shapes only, run as "
+        "`refinenet normals` runs them (`--strata auto`: on strata of a cloud noisier than the networks know, "
+        "`studies/results/strata.md`). Errors are unoriented angles in degrees. Mean and PGP are pooled over all "
+        "points of a category, RMSE is the point-weighted mean of per-cloud RMSE, and the Average the unweighted "
+        "mean of the categories (the synthetic protocol). Generated by `benchmarks/eval_dev_meshes.py`; the plot of "
+        f"mean error against noise is `{STEM}.png`.",
+        "",
+    ]
+    for run in runs:
+        lines += size_section(*run)
+    return "\n".join(lines)
+
+
+def size_section(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame) -> list[str]:
+    """One size's run: its networks and machine, and its tables per category, per noise level and per cloud."""
+    info, near, load = record["machine"], record["sharp_near_edges"], record["load_average_1min"]
+    flat = to_csv_frame(category_table, NAMES)
+    n = f"{record['points']:,}"
+    lines = [
+        f"## {n} points",
+        "",
+        "Refine-Net: " + ("the networks shipped with the package" if record["release_shipped"] else
+                          "another run's exported networks (`--release`; not the shipped ones)")
         + f" (profile {record['release']['profile']}, networks {record['release']['fingerprint']}, inputs beyond "
-        f"the paper: {', '.join(f'{k} = {v}' for k, v in record['release_inputs'].items()) or 'none'}, trained on "
-        f"the procedural shapes only, {record['precision']}), "
-        "run as `refinenet normals` runs them (`--strata auto`: on strata of a cloud noisier than the networks know, "
-        "`studies/results/strata.md`). Errors are unoriented angles in degrees. Generated by "
-        "`benchmarks/eval_dev_meshes.py`"
+        f"the paper: {', '.join(f'{k} = {v}' for k, v in record['release_inputs'].items()) or 'none'}, "
+        f"{record['precision']}). PCA's best k per category: "
+        + ", ".join(f"{c} {k}" for c, k in record["pca_best_k"].items()) + ". "
+        f"{info['cpu']}, {info['cores']} cores ({info['threads']} threads), {info['memory_gb']:.0f} GB, "
+        f"{info['platform']}, Python {info['python']}, numpy {info['numpy']}, scipy {info['scipy']}, "
+        + (f"{record['date']}; " if "date" in record else "")
+        + f"load average (1 min) at start {load[0]:.2f}, at end {load[1]:.2f} (above {info['cores']}: this run did "
+        "not have every core to itself)"
         + (f"; this run computed {', '.join(NAMES[m] for m in record['methods_run'])} and kept the other methods' "
            f"rows (and their timings) from the run before it (`{Path(record['reused_from']).name}`, the same clouds)"
            if record.get("reused_from") else "") + ".",
         "",
-        "## Per category",
+        f"### Per category, {n} points",
         "",
-        "Synthetic protocol: mean and PGP pooled over all points of a category, RMSE the point-weighted mean of "
-        "per-cloud RMSE; Average is the unweighted mean of the categories.",
-        "",
-    ]
-    flat = to_csv_frame(category_table, NAMES)
-    lines += markdown_table(flat, {c: ".3f" if c.endswith(("pgp5", "pgp10")) else ".2f" for c in flat.columns})
-    near = record["sharp_near_edges"]
-    lines += [
+        *markdown_table(flat, {c: ".3f" if c.endswith(("pgp5", "pgp10")) else ".2f" for c in flat.columns}),
         "",
         "Mean / RMSE per category, Refine-Net against the others: "
         + "; ".join(f"{c} {_pair(v['refinenet'])} against "
                     + ", ".join(f"{NAMES[r]} {_pair(v[r])}" for r in record["rivals"])
-                    + (" (met)" if v["met"] else " (**not met**)") for c, v in per_category.items()) + ".",
+                    + (" (met)" if v["met"] else " (**not met**)") for c, v in record["verdicts"].items()) + ".",
         "",
-        "## Per noise level",
+        f"### Per noise level, {n} points",
         "",
-        "Mean error in degrees pooled over the clouds of each category and noise level (percent of the diagonal); "
-        f"the plot is `{STEM}.png`.",
+        "Mean error in degrees pooled over the clouds of each category and noise level (percent of the diagonal).",
         "",
         *markdown_table(per_level(per_cloud).rename(columns=NAMES), {NAMES[m]: ".2f" for m in METHODS}),
         "",
-        "## Time",
+        f"### Time, {n} points",
         "",
         "Wall seconds per 100,000 points, summed over every cloud of the run (each method on the threads it was "
         f"given: ours and PCA, Jet and MFPS on {info['threads']}, the CGAL and DISNE peers on one, each a whole "
@@ -328,7 +357,7 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
         f"{near['points'] / near['total_points']:.1%}), pooled mean error: "
         + ", ".join(f"{NAMES[m]} {v:.2f}" for m, v in near["mean"].items()) + ".",
         "",
-        "## Per cloud",
+        f"### Per cloud, {n} points",
         "",
         "Mean error in degrees per test cloud and method (every statistic, and each run's wall and CPU seconds, "
         f"in {STEM}.json).",
@@ -339,22 +368,14 @@ def markdown(record: dict, per_cloud: pd.DataFrame, category_table: pd.DataFrame
     wide.index = wide.pop("category")
     wide.index.name = "category"
     lines += markdown_table(wide, {**{NAMES[m]: ".2f" for m in per_cloud["method"].unique()}, "noise": ".2f"})
-    load = record["load_average_1min"]
     total = per_cloud.groupby("method", sort=False)["seconds"].sum()
-    lines += [
+    return [
+        *lines,
         "",
         "Total wall seconds per method: " + ", ".join(f"{NAMES[m]} {s:.0f}" for m, s in total.items())
         + f"; whole run {record['wall_s']:.0f} s.",
         "",
-        "## Machine",
-        "",
-        f"{info['cpu']}, {info['cores']} cores ({info['threads']} threads), {info['memory_gb']:.0f} GB, "
-        f"{info['platform']}, Python {info['python']}, numpy {info['numpy']}, scipy {info['scipy']}. "
-        f"Load average (1 min) at start {load[0]:.2f}, at end {load[1]:.2f}: a load above {info['cores']} means "
-        "this run did not have every core to itself.",
-        "",
     ]
-    return "\n".join(lines)
 
 
 def absent(method: str, methods: list[str], reuse: Path, disne: Path | None) -> str:
@@ -385,27 +406,32 @@ def seconds_per_100k(per_cloud: pd.DataFrame) -> dict[str, float]:
     return {m: float(1e5 * sums.loc[m, "seconds"] / sums.loc[m, "n"]) for m in METHODS if m in sums.index}
 
 
-def noise_plot(per_cloud: pd.DataFrame, best_k: dict[str, int], footer: str, path: Path) -> None:
-    """Mean error against the noise level per method, one panel per category (PCA at the category's best k)."""
-    levels = per_level(per_cloud)
-    categories = list(dict.fromkeys(per_cloud["category"]))
-    fig, axes = plt.subplots(1, len(categories), figsize=(3.2 * len(categories), 3.2), dpi=120, squeeze=False)
-    for ax, category in zip(axes[0], categories, strict=True):
-        rows = levels[levels.index.str.startswith(category + " ")]
-        noise = [float(label.split()[-1]) for label in rows.index]
-        for method in PLOTTED:
-            column = f"pca{best_k[category]}" if method == PCA_BEST else method
-            if column in rows.columns:
-                ax.plot(noise, rows[column], marker="o", ms=3, label=NAMES[method],
-                        lw=2.2 if method == "refinenet" else 1.2)
-        ax.set_title(category, fontsize=9)
-        ax.set_xlabel("noise (% of the diagonal)", fontsize=8)
-        ax.set_xticks(noise)
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("mean error (deg)", fontsize=8)
+def noise_plot(runs: list[dict], path: Path) -> None:
+    """Mean error against the noise level per method, one panel per category and one row per size's record (PCA at
+    the category's best k)."""
+    categories = list(dict.fromkeys(row["category"] for row in runs[0]["per_cloud"]))
+    fig, axes = plt.subplots(len(runs), len(categories), figsize=(3.2 * len(categories), 3.2 * len(runs)), dpi=120,
+                             squeeze=False)
+    for row, record in zip(axes, runs, strict=True):
+        levels = per_level(pd.DataFrame(record["per_cloud"]))
+        for ax, category in zip(row, categories, strict=True):
+            rows = levels[levels.index.str.startswith(category + " ")]
+            noise = [float(label.split()[-1]) for label in rows.index]
+            for method in PLOTTED:
+                column = f"pca{record['pca_best_k'][category]}" if method == PCA_BEST else method
+                if column in rows.columns:
+                    ax.plot(noise, rows[column], marker="o", ms=3, label=NAMES[method],
+                            lw=2.2 if method == "refinenet" else 1.2)
+            ax.set_title(f"{category}, {record['points']:,} points", fontsize=9)
+            ax.set_xlabel("noise (% of the diagonal)", fontsize=8)
+            ax.set_xticks(noise)
+            ax.grid(alpha=0.3)
+        row[0].set_ylabel("mean error (deg)", fontsize=8)
     axes[0][-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1))
-    fig.text(0.01, 0.01, footer, fontsize=6, color="0.35")
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    footer = "; ".join(f"{r['points']:,} points: networks {r['release']['fingerprint']}, {r['machine']['cpu']}"
+                       + (f", {r['date']}" if "date" in r else "") for r in runs)
+    fig.text(0.01, 0.01, f"{STEM}: {footer}", fontsize=6, color="0.35")
+    fig.tight_layout(rect=(0, 0.05 / len(runs), 1, 1))
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", metadata={"Software": None})
     plt.close(fig)
@@ -415,9 +441,9 @@ def reused_rows(path: Path, methods: list[str], n_points: int) -> pd.DataFrame:
     """The per-cloud rows of `methods` from an earlier run of the same clouds (same seeds and point count)."""
     if not methods:
         return pd.DataFrame()
-    record = json.loads(path.read_text())
-    if record["points"] != n_points or record["global_seed"] != GLOBAL_SEED:
-        raise SystemExit(f"{path}: a run of {record['points']} points, seed {record['global_seed']}; cannot reuse")
+    record = json.loads(path.read_text()).get(str(n_points))
+    if record is None or record["global_seed"] != GLOBAL_SEED:
+        raise SystemExit(f"{path}: no run of {n_points} points with seed {GLOBAL_SEED}; cannot reuse its rows")
     rows = pd.DataFrame(record["per_cloud"])
     return rows[rows["method"].isin(methods)]
 
@@ -439,15 +465,16 @@ def near_edge_means(per_cloud: pd.DataFrame, category: str) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--points", type=int, default=100_000)
+    parser.add_argument("--points", type=int, nargs="+", default=list(SIZES),
+                        help="the cloud sizes to run, each replacing its own record (the other sizes' are kept)")
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--meshes", type=Path, default=DEV)
     parser.add_argument("--out", type=Path, default=RESULTS)
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS),
                         help="run only these; the other methods' rows come from --reuse")
     parser.add_argument("--reuse", type=Path, default=RESULTS / "dev_meshes.json",
-                        help="an earlier run's dev_meshes.json whose rows of the methods not run are kept (the same "
-                             "clouds: checked by their seeds and sizes)")
+                        help="an earlier dev_meshes.json whose rows of the methods not run are kept, from its run of "
+                             "the same size (the same clouds: checked by their seeds and sizes)")
     parser.add_argument("--release", type=Path, default=SHIPPED,
                         help="a release folder to evaluate in place of the shipped networks")
     parser.add_argument("--disne", type=Path, help="a DISNE folder made by ../shared/peers/disne/prepare.sh")
@@ -455,10 +482,10 @@ def main() -> None:
                         help="compute nothing: rebuild the report and plot under --out from its dev_meshes.json")
     args = parser.parse_args()
     thread_independent_products()  # Refine-Net's normals bit for bit as `refinenet normals` computes them
+    path = args.out / f"{STEM}.json"
+    records = json.loads(path.read_text()) if path.is_file() else {}
     if args.report:
-        record = json.loads((args.out / f"{STEM}.json").read_text())
-        report(args.out, record | {"not_run": {m: "not in this run" for m in PEER_METHODS
-                                               if m not in {r["method"] for r in record["per_cloud"]}}})
+        report(args.out, records)
         return
     if args.release.resolve() != SHIPPED and args.out.resolve() == RESULTS.resolve():
         sys.exit(f"eval_dev_meshes: --release {args.release}: give --out a folder outside {RESULTS} (it holds the "
@@ -466,11 +493,20 @@ def main() -> None:
     test_clouds = clouds(dev_meshes(args.meshes))
     precision = resolve_precision("auto", resolve_device("cpu"))
     release = load_release(args.release, precision=precision)
-    kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], args.points)
+    for n_points in args.points:
+        records[str(n_points)] = run(args, n_points, test_clouds, release, precision)
+        report(args.out, records)
+        (args.out / f"{STEM}.partial.jsonl").unlink()
+
+
+def run(args: argparse.Namespace, n_points: int, test_clouds: list, release, precision: str) -> dict:
+    """The record of one size's run: every test cloud's rows, resumed from the partial file where a killed run with
+    the same settings left them, and the rows of the methods not run from `--reuse`."""
+    kept = reused_rows(args.reuse, [m for m in METHODS if m not in args.methods], n_points)
     load_start, start = os.getloadavg()[0], time.perf_counter()
     args.out.mkdir(parents=True, exist_ok=True)
     partial = args.out / f"{STEM}.partial.jsonl"
-    settings = {"points": args.points, "threads": args.threads, "methods": list(args.methods),
+    settings = {"points": n_points, "threads": args.threads, "methods": list(args.methods),
                 "precision": precision, "release": shipped_networks(release)["fingerprint"]}
     finished = finished_clouds(partial, settings)
     rows, resumed = [], 0
@@ -478,7 +514,7 @@ def main() -> None:
         cloud = (category, key, noise)
         resumed += cloud in finished
         if cloud not in finished:
-            finished[cloud] = evaluate_cloud(category, key, path, noise, args.points, args.threads, release,
+            finished[cloud] = evaluate_cloud(category, key, path, noise, n_points, args.threads, release,
                                              tuple(args.methods), args.disne)
             keep_finished(partial, settings, cloud, finished[cloud])
         rows += finished[cloud]
@@ -489,11 +525,10 @@ def main() -> None:
     if short:
         raise SystemExit(f"eval_dev_meshes: no rows for every cloud of {', '.join(short)} (neither run nor in "
                          f"{args.reuse})")
-    not_run = {m: absent(m, args.methods, args.reuse, args.disne) for m in PEER_METHODS if m not in counts}
-    record = {
+    return {
         "requirement": " ".join(__doc__.split('"')[1].split()),
-        "not_run": not_run,
-        "points": args.points, "noise_percent": {c: list(v) for c, v in PARAMS.noise.test.items()},
+        "not_run": {m: absent(m, args.methods, args.reuse, args.disne) for m in PEER_METHODS if m not in counts},
+        "points": n_points, "noise_percent": {c: list(v) for c, v in PARAMS.noise.test.items()},
         "global_seed": GLOBAL_SEED, "meshes_dir": str(args.meshes.resolve()),
         "precision": precision, "methods_run": list(args.methods),
         "reused_from": str(args.reuse) if len(args.methods) < len(METHODS) else None,
@@ -508,35 +543,36 @@ def main() -> None:
         "machine": machine(args.threads),
         "date": datetime.date.today().isoformat(),
     }
-    report(args.out, record)
-    partial.unlink()
 
 
-def report(out: Path, record: dict) -> None:
-    """dev_meshes.json, .md and .png under `out`, from a record's per-cloud rows: the tables, the verdicts and the
-    plot are derived here, so that `--report` rebuilds them from a run's record."""
-    per_cloud = pd.DataFrame(record["per_cloud"])
-    category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
-    sharp = category_table[("SharpFeature", "mean")]
-    mfps_met = bool(sharp["mfps"] < sharp[PCA_BEST] and sharp["mfps"] < sharp["jet"])
-    sharp_rows = per_cloud[(per_cloud["category"] == "SharpFeature") & (per_cloud["method"] == "mfps")]
-    record |= {
-        "verdicts": verdicts(category_table),
-        "rivals": [r for r in RIVALS if r in category_table.index],
-        "mfps_verdict": f"MFPS on SharpFeature: {sharp['mfps']:.2f} against PCA (best k) {sharp[PCA_BEST]:.2f} and "
-                        f"Jet {sharp['jet']:.2f} ({'met' if mfps_met else 'not met'}).",
-        "pca_best_k": best_k,
-        "per_category": {NAMES[m]: {f"{c}/{k}": float(v) for (c, k), v in row.items()}
-                         for m, row in category_table.iterrows()},
-        "sharp_near_edges": {"points": int(sharp_rows["near_edge_points"].sum()),
-                             "total_points": int(sharp_rows["n"].sum()),
-                             "mean": near_edge_means(per_cloud, "SharpFeature")},
-    }
-    write_results(out, STEM, record, markdown(record, per_cloud, category_table))
-    noise_plot(per_cloud, best_k, f"{STEM}: {record['points']:,} points per cloud, networks "
-               f"{record['release']['fingerprint']}, {record['machine']['cpu']}"
-               + (f", {record['date']}" if "date" in record else ""), out / f"{STEM}.png")
-    print(to_csv_frame(category_table, NAMES).round(3).to_string())
+def report(out: Path, records: dict[str, dict]) -> None:
+    """dev_meshes.json, .md and .png under `out`, from every size's record: each record's tables, verdicts and plot
+    are derived here from its per-cloud rows, so that `--report` rebuilds them from the records."""
+    records = dict(sorted(records.items(), key=lambda item: int(item[0])))
+    runs = []
+    for record in records.values():
+        per_cloud = pd.DataFrame(record["per_cloud"])
+        category_table, best_k = with_best_pca(aggregate(per_cloud, "synthetic", METRICS))
+        sharp = category_table[("SharpFeature", "mean")]
+        mfps_met = bool(sharp["mfps"] < sharp[PCA_BEST] and sharp["mfps"] < sharp["jet"])
+        sharp_rows = per_cloud[(per_cloud["category"] == "SharpFeature") & (per_cloud["method"] == "mfps")]
+        record |= {
+            "verdicts": verdicts(category_table),
+            "rivals": [r for r in RIVALS if r in category_table.index],
+            "mfps_verdict": f"MFPS on SharpFeature: {sharp['mfps']:.2f} against PCA (best k) "
+                            f"{sharp[PCA_BEST]:.2f} and Jet {sharp['jet']:.2f} ({'met' if mfps_met else 'not met'}).",
+            "pca_best_k": best_k,
+            "per_category": {NAMES[m]: {f"{c}/{k}": float(v) for (c, k), v in row.items()}
+                             for m, row in category_table.iterrows()},
+            "sharp_near_edges": {"points": int(sharp_rows["near_edge_points"].sum()),
+                                 "total_points": int(sharp_rows["n"].sum()),
+                                 "mean": near_edge_means(per_cloud, "SharpFeature")},
+        }
+        runs.append((record, per_cloud, category_table))
+        print(f"{record['points']:,} points:")
+        print(to_csv_frame(category_table, NAMES).round(3).to_string())
+    write_results(out, STEM, records, markdown(runs))
+    noise_plot([record for record, _, _ in runs], out / f"{STEM}.png")
 
 
 if __name__ == "__main__":
