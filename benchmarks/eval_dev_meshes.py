@@ -406,14 +406,14 @@ def seconds_per_100k(per_cloud: pd.DataFrame) -> dict[str, float]:
     return {m: float(1e5 * sums.loc[m, "seconds"] / sums.loc[m, "n"]) for m in METHODS if m in sums.index}
 
 
-def noise_plot(runs: list[dict], path: Path) -> None:
-    """Mean error against the noise level per method, one panel per category and one row per size's record (PCA at
-    the category's best k)."""
-    categories = list(dict.fromkeys(row["category"] for row in runs[0]["per_cloud"]))
+def noise_plot(runs: list[tuple[dict, pd.DataFrame, pd.DataFrame]], path: Path) -> None:
+    """Mean error against the noise level per method, one panel per category and one row per size's run (its record
+    and per-cloud rows; PCA at the category's best k)."""
+    categories = list(dict.fromkeys(runs[0][1]["category"]))
     fig, axes = plt.subplots(len(runs), len(categories), figsize=(3.2 * len(categories), 3.2 * len(runs)), dpi=120,
                              squeeze=False)
-    for row, record in zip(axes, runs, strict=True):
-        levels = per_level(pd.DataFrame(record["per_cloud"]))
+    for row, (record, per_cloud, _) in zip(axes, runs, strict=True):
+        levels = per_level(per_cloud)
         for ax, category in zip(row, categories, strict=True):
             rows = levels[levels.index.str.startswith(category + " ")]
             noise = [float(label.split()[-1]) for label in rows.index]
@@ -429,7 +429,7 @@ def noise_plot(runs: list[dict], path: Path) -> None:
         row[0].set_ylabel("mean error (deg)", fontsize=8)
     axes[0][-1].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1))
     footer = "; ".join(f"{r['points']:,} points: networks {r['release']['fingerprint']}, {r['machine']['cpu']}"
-                       + (f", {r['date']}" if "date" in r else "") for r in runs)
+                       + (f", {r['date']}" if "date" in r else "") for r, _, _ in runs)
     fig.text(0.01, 0.01, f"{STEM}: {footer}", fontsize=6, color="0.35")
     fig.tight_layout(rect=(0, 0.05 / len(runs), 1, 1))
     with atomic_path(path) as tmp:
@@ -572,7 +572,7 @@ def report(out: Path, records: dict[str, dict]) -> None:
         print(f"{record['points']:,} points:")
         print(to_csv_frame(category_table, NAMES).round(3).to_string())
     write_results(out, STEM, records, markdown(runs))
-    noise_plot([record for record, _, _ in runs], out / f"{STEM}.png")
+    noise_plot(runs, out / f"{STEM}.png")
 
 
 if __name__ == "__main__":
