@@ -181,6 +181,27 @@ def test_reduced_precision_copy_computes_the_feature_modules_in_bfloat16():
         reduced_precision(model, "float16")
 
 
+def test_feature_modules_hand_the_connections_autocasts_dtype_in_training_and_float32_when_reduced():
+    """Training in bfloat16 (autocast) passes the feature modules' bfloat16 outputs on, as the training that made
+    the shipped networks did; only a copy lowered by `reduced_precision` casts them back to float32."""
+    torch.manual_seed(0)
+    model = RefineNet(preset("release"))
+    seen: dict[str, torch.dtype] = {}
+
+    def record(module):
+        for name in ("point_module", "height_map_module"):
+            getattr(module, name).register_forward_hook(lambda _m, _i, out, name=name: seen.update({name: out.dtype}))
+        return module
+
+    inputs = _inputs(model.config, 8)
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        record(model)(*inputs)
+    assert seen == {"point_module": torch.bfloat16, "height_map_module": torch.bfloat16}
+    with torch.no_grad():
+        record(reduced_precision(model.eval(), "bfloat16"))(*inputs)
+    assert seen == {"point_module": torch.float32, "height_map_module": torch.float32}
+
+
 def _pooling_layers(seed: int = 0) -> tuple[torch.nn.Linear, torch.nn.BatchNorm1d]:
     """The point module's last layer in float64, with some BN scales negative (where the max-pool selects the
     smallest product) and non-trivial running statistics."""

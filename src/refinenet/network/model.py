@@ -189,7 +189,6 @@ class PointModule(nn.Module):
         """Patches the MLP and max-pool take at a time (None: the whole batch); set by `inference_layout`."""
 
     def forward(self, points: Tensor) -> Tensor:
-        # The module may compute in a lower precision (`reduced_precision`); its output goes on in the input's.
         dtype = points.dtype
         points = points.to(self.mlp[0].weight.dtype)
         if self.plain_pooling:
@@ -198,7 +197,7 @@ class PointModule(nn.Module):
             pooled = self._pooled(points)
         else:
             pooled = torch.cat([self._pooled(part) for part in points.split(self.chunk)])
-        return self.fc(pooled).to(dtype)
+        return _in_precision(self.fc(pooled), self.mlp[0].weight, dtype)
 
     def _pooled(self, points: Tensor) -> Tensor:
         return max_pool_linear_bn(self.mlp[:-2](points), self.mlp[-2], self.mlp[-1])
@@ -226,11 +225,17 @@ class HeightMapModule(nn.Sequential):
         """Of the maps through the convolutions; set by `inference_layout`."""
 
     def forward(self, heights: Tensor) -> Tensor:
-        # The module may compute in a lower precision (`reduced_precision`); its output goes on in the input's.
         x = heights.to(self[0].weight.dtype).contiguous(memory_format=self.memory_format)
         for layer in self:
             x = layer(x)
-        return x.to(heights.dtype)
+        return _in_precision(x, self[0].weight, heights.dtype)
+
+
+def _in_precision(out: Tensor, weight: Tensor, dtype: torch.dtype) -> Tensor:
+    """A feature module's output in its input's `dtype` where the module itself computes in a lower precision
+    (`reduced_precision`), so that the connections stay in float32. Under autocast (training in bfloat16) the
+    weights are float32 and the output stays as autocast made it: the training that made the shipped networks."""
+    return out.to(dtype) if weight.dtype != dtype else out
 
 
 class Refinement(nn.Module):
