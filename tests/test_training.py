@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -197,3 +198,28 @@ def test_other_settings_start_over(tmp_path, clouds):
                           tmp_path / "fresh", False)
     assert resumed.epochs == fresh.epochs == 2
     assert resumed.best_val_rmse_deg == fresh.best_val_rmse_deg
+
+
+@pytest.mark.parametrize("change", ["features", "code"])
+def test_a_checkpoint_of_other_inputs_or_code_starts_over(tmp_path, clouds, monkeypatch, change):
+    """A step rerun because its features or its code changed trains anew instead of finishing the checkpoint's
+    run; the same inputs and code resume it."""
+    config = train_config(batch_size=128, max_epochs=1, threads=1)
+    more = replace(config, max_epochs=2)  # a resumable change: a resumed run trains one epoch, a new one two
+    train_cluster(config, NORMALS_ONLY, cluster_data(clouds, 0, config, patch_config()), tmp_path / "first", False,
+                  checkpoint_dir=tmp_path / "ckpt")
+    shutil.copytree(tmp_path / "ckpt", tmp_path / "same")
+    epochs, train_epoch = [], training._train_epoch
+    monkeypatch.setattr(training, "_train_epoch", lambda *args: epochs.append(1) or train_epoch(*args))
+    train_cluster(more, NORMALS_ONLY, cluster_data(clouds, 0, more, patch_config()), tmp_path / "same_out", False,
+                  checkpoint_dir=tmp_path / "same")
+    assert len(epochs) == 1
+    rerun = clouds
+    if change == "code":
+        monkeypatch.setattr(training, "_code_digest", lambda: "other code")
+    else:
+        rerun = [replace(c, features=replace(c.features, nf=c.features.nf * np.float32(1.001))) for c in clouds]
+    epochs.clear()
+    train_cluster(more, NORMALS_ONLY, cluster_data(rerun, 0, more, patch_config()), tmp_path / "rerun", False,
+                  checkpoint_dir=tmp_path / "ckpt")
+    assert len(epochs) == 2

@@ -2,9 +2,9 @@
 
 Output folder of a cluster (`cluster_dir`):
 * `checkpoint.pt`: model, optimiser, epoch, best epoch and validation RMSE, the history rows and a fingerprint of
-  the settings; written atomically after every epoch. Random state needs no saving: every epoch reseeds numpy
-  (shuffling, ball patches) and torch (dropout) from (seed, epoch), so a resumed epoch draws what an
-  uninterrupted one would.
+  the settings, the training data and the code (`_fingerprint`); written atomically after every epoch. Random
+  state needs no saving: every epoch reseeds numpy (shuffling, ball patches) and torch (dropout) from (seed,
+  epoch), so a resumed epoch draws what an uninterrupted one would.
 * `best.pt`: the weights of the epoch with the lowest validation RMSE (unoriented angle, degrees). They are kept
   beside the checkpoint and copied into the output folder when training ends, so a resumption after the folder
   was cleared (Snakemake and DVC clear an unfinished step's outputs) still ends with the best epoch's weights.
@@ -215,19 +215,36 @@ def _optimizer(config: TrainConfig, model: torch.nn.Module) -> torch.optim.Optim
 
 
 def _fingerprint(config: TrainConfig, network: NetworkConfig, data: ClusterData) -> str:
-    """What must not change for a checkpoint to be resumed: settings, architecture and the samples."""
+    """What must not change for a checkpoint to be resumed: settings, architecture, the samples, the clouds and
+    features they are drawn from, and the code. A step rerun after its inputs or code changed (Snakemake and DVC
+    rerun it then) starts over instead of finishing the other run's training."""
     train = {k: v for k, v in asdict(config).items() if k not in RESUMABLE_CHANGES}
+    inputs = [a for cloud in data.clouds for a in (cloud.points, cloud.normals, cloud.clusters, cloud.features.nf,
+                                                    cloud.features.frames, cloud.features.heights)]
     samples = {"cluster": data.cluster, "patch": asdict(data.patch), "clouds": len(data.clouds),
-               "train": _digest(data.train.cloud, data.train.point), "val": _digest(data.val.cloud, data.val.point)}
-    return json.dumps({"train": train, "network": json.loads(network_fingerprint(network)), "samples": samples},
-                      sort_keys=True)
+               "train": _digest(data.train.cloud, data.train.point), "val": _digest(data.val.cloud, data.val.point),
+               "inputs": _digest(*inputs)}
+    return json.dumps({"train": train, "network": json.loads(network_fingerprint(network)), "samples": samples,
+                       "code": _code_digest()}, sort_keys=True)
 
 
 def _digest(*arrays: np.ndarray) -> str:
-    """A short content hash of integer arrays (which points are training and validation samples)."""
+    """A short hash of arrays' dtypes, shapes and contents."""
     h = hashlib.sha256()
     for a in arrays:
-        h.update(np.ascontiguousarray(a, dtype=np.int64).tobytes())
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.data)
+    return h.hexdigest()[:16]
+
+
+def _code_digest() -> str:
+    """A short hash of the package's source: which module a change touches is not worth the risk of guessing."""
+    package = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        h.update(path.relative_to(package).as_posix().encode())
+        h.update(path.read_bytes())
     return h.hexdigest()[:16]
 
 
