@@ -194,11 +194,12 @@ def test_feature_modules_hand_the_connections_autocasts_dtype_in_training_and_fl
         return module
 
     inputs = _inputs(model.config, 8)
+    reduced = reduced_precision(model.eval(), "bfloat16")
     with torch.autocast("cpu", dtype=torch.bfloat16):
-        record(model)(*inputs)
+        record(model.train())(*inputs)
     assert seen == {"point_module": torch.bfloat16, "height_map_module": torch.bfloat16}
     with torch.no_grad():
-        record(reduced_precision(model.eval(), "bfloat16"))(*inputs)
+        record(reduced)(*inputs)
     assert seen == {"point_module": torch.float32, "height_map_module": torch.float32}
 
 
