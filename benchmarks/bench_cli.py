@@ -44,7 +44,7 @@ from refinenet.data.noise import add_gaussian_noise, bbox_diagonal
 from refinenet.data.shapes import sample_shape
 from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.network.devices import resolve_precision
-from refinenet.network.model import INFERENCE_CHUNK
+from refinenet.network.fused import INFERENCE_CHUNK
 from refinenet.network.release import CARD_JSON, SHIPPED, load_release
 from refinenet.threads import VARIABLES
 
@@ -64,7 +64,7 @@ def noisy_cloud(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 def gemm_gflops(threads: int, dtype: torch.dtype = torch.float32) -> float:
     """The machine's speed now: the best of 10 matrix products in the shape the network's largest layer runs in
-    (`model.INFERENCE_CHUNK` patches of 100 points, 128 by 1024 channels) on `threads` threads. The CPU is shared,
+    (`fused.INFERENCE_CHUNK` patches of 100 points, 128 by 1024 channels) on `threads` threads. The CPU is shared,
     so timings are read against it."""
     torch.set_num_threads(threads)
     rows = INFERENCE_CHUNK * 100
@@ -79,7 +79,7 @@ def network_flops_per_point() -> float:
     points, _ = noisy_cloud(FLOP_POINTS)
     release = load_release(SHIPPED)
     # One thread, so that the batches run on this one, where the counter (a per-thread mode) sees them.
-    fused = {torch.ops.mkldnn._linear_pointwise: _linear_flops,  # `model.LinearReLU` and `model.Conv2dReLU`,
+    fused = {torch.ops.mkldnn._linear_pointwise: _linear_flops,  # `fused.LinearReLU` and `fused.Conv2dReLU`,
              torch.ops.mkldnn._convolution_pointwise: _convolution_flops}  # which torch does not count
     counter = FlopCounterMode(display=False, custom_mapping=fused)
     with mock.patch.dict(os.environ, {VARIABLES[0]: "1"}), counter:

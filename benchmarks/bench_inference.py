@@ -27,12 +27,12 @@ import torch
 from machine import machine_info
 
 from refinenet.atomic import write_text
+from refinenet.network.fused import fuse_batch_norm
 from refinenet.network.model import (
     NetworkConfig,
     RefineNet,
     architecture_table,
     example_inputs,
-    fuse_batch_norm,
     preset,
 )
 

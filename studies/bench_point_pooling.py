@@ -27,7 +27,8 @@ from machine import machine_info, write_results  # noqa: E402
 from refinenet import config  # noqa: E402
 from refinenet.allocator import keep_freed_memory  # noqa: E402
 from refinenet.network.devices import resolve_precision  # noqa: E402
-from refinenet.network.model import RefineNet, architecture, example_inputs, for_inference  # noqa: E402
+from refinenet.network.fused import for_inference  # noqa: E402
+from refinenet.network.model import RefineNet, architecture, example_inputs  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 POOLINGS = {"plain": True, "selected": False}  # value: PointModule.plain_pooling

@@ -10,24 +10,26 @@ import pytest
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
+from refinenet.network.fused import (
+    FUSED_RELU_DTYPES,
+    Conv2dReLU,
+    LinearReLU,
+    SlidingMax,
+    for_inference,
+    fuse_batch_norm,
+    inference_layout,
+)
 from refinenet.network.model import (
     CONNECTIONS,
     FEATURES,
-    FUSED_RELU_DTYPES,
     PRECISIONS,
-    Conv2dReLU,
-    LinearReLU,
     NetworkConfig,
     RefineNet,
     RotationMatrix,
-    SlidingMax,
     TransformationMatrix,
     architecture_table,
     count_parameters,
     example_inputs,
-    for_inference,
-    fuse_batch_norm,
-    inference_layout,
     preset,
     quaternion_to_matrix,
     reduced_precision,
@@ -391,7 +393,7 @@ def test_the_fused_relus_give_the_network_of_the_two_layers_bit_for_bit(precisio
     for seed in range(3):  # non-trivial BN statistics
         model(*_inputs(model.config, 16, seed=seed))
     model.eval()
-    with mock.patch("refinenet.network.model._fuse_relus"):
+    with mock.patch("refinenet.network.fused._fuse_relus"):
         two_layers = for_inference(copy.deepcopy(model), True, precision)
     fused = for_inference(model, True, precision)
     mlp = fused.point_module.mlp
@@ -419,7 +421,7 @@ def test_the_fused_convolutions_give_the_height_map_module_bit_for_bit(precision
     for seed in range(3):
         model(*_inputs(model.config, 16, seed=seed))
     model.eval()
-    with mock.patch("refinenet.network.model._fuse_convolutions"):
+    with mock.patch("refinenet.network.fused._fuse_convolutions"):
         plain = for_inference(copy.deepcopy(model), True, precision)
     fused = for_inference(model, True, precision)
     maps = fused.height_map_module

@@ -23,7 +23,8 @@ from refinenet.geometry.frames import to_world
 from refinenet.network.clustering import ClusterModel
 from refinenet.network.dataset import make_inputs, prepare
 from refinenet.network.devices import resolve_device, resolve_precision
-from refinenet.network.model import NetworkConfig, RefineNet, for_inference
+from refinenet.network.fused import for_inference
+from refinenet.network.model import NetworkConfig, RefineNet
 from refinenet.network.training import BEST, EMPTY, network_fingerprint
 from refinenet.profiling import stage
 from refinenet.threads import native_threads
@@ -127,7 +128,7 @@ def load_networks(folders: Sequence[str | Path], network: NetworkConfig, device:
     cluster c's training (`training.train_cluster`).
 
     Clusters marked empty are left out (refine_normals keeps their first normals). `fuse` folds BN into the
-    preceding Linear layers: equal outputs up to float rounding, faster (`model.fuse_batch_norm`). `precision`
+    preceding Linear layers: equal outputs up to float rounding, faster (`fused.fuse_batch_norm`). `precision`
     (`InferenceConfig.precision`) is that of the feature modules (`model.reduced_precision`).
     """
     device = resolve_device(device)

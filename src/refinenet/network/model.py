@@ -12,7 +12,6 @@ recommends and are noted in the docstring of the class that makes them.
 from __future__ import annotations
 
 import copy
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -21,7 +20,6 @@ from typing import Any
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
-from torch.nn.utils.fusion import fuse_linear_bn_eval
 
 from refinenet.config import FeatureConfig, NetworkParams, PatchConfig
 from refinenet.errors import ParamsError
@@ -186,7 +184,7 @@ class PointModule(nn.Module):
         """True: every MLP layer runs on every point, then the max-pool (the definition, which
         `max_pool_linear_bn` equals; used where each layer's output must be seen, as by `architecture_table`)."""
         self.chunk: int | None = None
-        """Patches the MLP and max-pool take at a time (None: the whole batch); set by `inference_layout`."""
+        """Patches the MLP and max-pool take at a time (None: the whole batch); set by `fused.inference_layout`."""
 
     def forward(self, points: Tensor) -> Tensor:
         dtype = points.dtype
@@ -222,7 +220,7 @@ class HeightMapModule(nn.Sequential):
         super().__init__(*convs, nn.Flatten(), *_fc((flat, *hidden, out_dim), dropout))
         self.n_convolutional = len(convs)
         self.memory_format = torch.contiguous_format
-        """Of the maps through the convolutions; set by `inference_layout`."""
+        """Of the maps through the convolutions; set by `fused.inference_layout`."""
 
     def forward(self, heights: Tensor) -> Tensor:
         x = heights.to(self[0].weight.dtype).contiguous(memory_format=self.memory_format)
@@ -426,7 +424,7 @@ class RefineNet(nn.Module):
                                                      dims[-1], config.dropout)
         self.connections = nn.ModuleList(connections)
         self.branches_at_once = False
-        """True: the branches are computed together (`_all_branches`); set by `inference_layout`."""
+        """True: the branches are computed together (`_all_branches`); set by `fused.inference_layout`."""
         if connections:
             self.output_module = OutputModule(config.n_normals * connections[0].out_dim, config.output_fc,
                                               config.dropout, config.output, config.n_normals)
@@ -475,25 +473,6 @@ class RefineNet(nn.Module):
                                               for step in conn.refinements)
 
 
-def fuse_batch_norm(model: RefineNet) -> RefineNet:
-    """An eval-mode copy for inference in which every BN that follows a Linear is folded into it.
-
-    BN in eval mode is a per-channel affine map, so the outputs are equal up to float rounding; skipping the
-    BN passes over the large per-point activations makes CPU inference 1.3-1.8x faster
-    (benchmarks/results/inference.md). The copy must not be trained: its BN statistics are frozen in.
-    """
-    return _fold_batch_norm(copy.deepcopy(model).eval())
-
-
-def _fold_batch_norm(model: RefineNet) -> RefineNet:
-    for seq in model.modules():
-        if isinstance(seq, nn.Sequential):
-            for i in range(len(seq) - 1):
-                if isinstance(seq[i], nn.Linear) and isinstance(seq[i + 1], nn.BatchNorm1d):
-                    seq[i], seq[i + 1] = fuse_linear_bn_eval(seq[i], seq[i + 1]), nn.Identity()
-    return model
-
-
 #: Inference precisions of the feature modules (`reduced_precision`).
 PRECISIONS = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 
@@ -508,141 +487,18 @@ def reduced_precision(model: RefineNet, precision: str) -> RefineNet:
     0.003 deg on average and the mean error by 0.0005 deg (benchmarks/results/cli.md). The connection and output
     modules, where bfloat16 does cost accuracy (+0.02 deg mean error with them in bfloat16 too), stay in float32.
     """
-    _check_precision(precision)
-    return model if precision == "float32" else _set_precision(copy.deepcopy(model).eval(), precision)
+    check_precision(precision)
+    return model if precision == "float32" else set_precision(copy.deepcopy(model).eval(), precision)
 
 
-#: Patches the point module takes at a time in inference: their P x 1024 products then stay in the cache, where a
-#: whole batch's went to memory and back.
-INFERENCE_CHUNK = 64
-
-
-def for_inference(model: RefineNet, fuse: bool, precision: str) -> RefineNet:
-    """`model` itself, a network its caller has just loaded and owns, made ready for inference in place: eval mode,
-    BN folded where `fuse` (`fuse_batch_norm`), the feature modules in `precision` (`reduced_precision`), laid out
-    by `inference_layout`. The copying forms deep-copy the network each time, which every inference job paid for
-    every network."""
-    _check_precision(precision)
-    model.eval()
-    if fuse:
-        _fold_batch_norm(model)
-    inference_layout(model)
-    return model if precision == "float32" else _set_precision(model, precision)
-
-
-def inference_layout(model: RefineNet) -> RefineNet:
-    """`model` itself, set to compute the faster way without gradients: the point module INFERENCE_CHUNK patches at
-    a time with its ReLUs fused into the products before them once BN is folded (`LinearReLU`), the height maps
-    channels-last (oneDNN's faster layout for small maps) with their ReLUs fused into the convolutions
-    (`Conv2dReLU`) and their max-pools as `SlidingMax`, and the X branches of Refine-Net's connection together
-    (`RefineNet._all_branches`). The feature modules take half the time on a 2-core CPU, the connections a fifth;
-    the outputs equal the training layout's up to float32 rounding (benchmarks/results/cli.md). Training keeps the
-    default layout, which its gradients were tuned on."""
-    model.branches_at_once = model.shares_weight_matrices
-    if model.point_module is not None:
-        model.point_module.chunk = INFERENCE_CHUNK
-        _fuse_relus(model.point_module.mlp)
-    if model.height_map_module is not None:
-        model.height_map_module.memory_format = torch.channels_last
-        _fuse_convolutions(model.height_map_module)
-    return model
-
-
-class LinearReLU(nn.Linear):
-    """relu(linear(x)) in one pass where oneDNN can (a CPU, no gradients): its fused ReLU, bit for bit the same,
-    saves the pass over the P x 64 activations, which takes as long as the small product itself and halves the point
-    MLP's time before its last layer."""
-
-    @classmethod
-    def of(cls, linear: nn.Linear) -> LinearReLU:
-        fused = cls(linear.in_features, linear.out_features, device="meta")
-        fused.weight, fused.bias = linear.weight, linear.bias
-        return fused
-
-    def forward(self, x: Tensor) -> Tensor:
-        if x.dtype in FUSED_RELU_DTYPES and x.device.type == "cpu" and not torch.is_grad_enabled():
-            return torch.ops.mkldnn._linear_pointwise(x, self.weight, self.bias, "relu", [], "")
-        return F.relu(super().forward(x))
-
-
-class Conv2dReLU(nn.Conv2d):
-    """relu(conv(x)) in one pass where oneDNN can (a CPU, no gradients): `LinearReLU`'s fusion for the height-map
-    convolutions, bit for bit the same; a fifth less time for the convolutions in bfloat16."""
-
-    @classmethod
-    def of(cls, conv: nn.Conv2d) -> Conv2dReLU:
-        fused = cls(conv.in_channels, conv.out_channels, conv.kernel_size, conv.stride, conv.padding, conv.dilation,
-                    conv.groups, device="meta")
-        fused.weight, fused.bias = conv.weight, conv.bias
-        return fused
-
-    def forward(self, x: Tensor) -> Tensor:
-        if x.dtype in FUSED_RELU_DTYPES and x.device.type == "cpu" and not torch.is_grad_enabled():
-            return torch.ops.mkldnn._convolution_pointwise(x, self.weight, self.bias, self.padding, self.stride,
-                                                           self.dilation, self.groups, "relu", [], "")
-        return F.relu(super().forward(x))
-
-
-class SlidingMax(nn.Module):
-    """A k x k max-pool of stride 1 and no padding as two passes of elementwise maxima, along rows then columns:
-    the same values, in a quarter of the time of torch's pooling kernel on small channels-last maps (it also
-    tracks the index of each maximum)."""
-
-    def __init__(self, kernel_size: int):
-        super().__init__()
-        self.kernel_size = kernel_size
-
-    @staticmethod
-    def replaces(layer: nn.Module) -> bool:
-        """Whether `layer` is a max-pool this module computes."""
-        return isinstance(layer, nn.MaxPool2d) and isinstance(layer.kernel_size, int) and layer.stride == 1 \
-            and layer.padding == 0 and layer.dilation == 1 and not layer.ceil_mode
-
-    def forward(self, x: Tensor) -> Tensor:
-        k = self.kernel_size
-        rows = x.shape[2] - k + 1
-        x = functools.reduce(torch.maximum, (x[:, :, i:i + rows] for i in range(k)))
-        columns = x.shape[3] - k + 1
-        return functools.reduce(torch.maximum, (x[:, :, :, j:j + columns] for j in range(k)))
-
-    def extra_repr(self) -> str:
-        return f"kernel_size={self.kernel_size}"
-
-
-def _onednn_dtypes() -> tuple[torch.dtype, ...]:
-    """The dtypes oneDNN's fused linear takes here: none without it, bfloat16 only where the CPU has it natively."""
-    if not (torch.backends.mkldnn.is_available() and hasattr(torch.ops.mkldnn, "_linear_pointwise")):
-        return ()
-    return (torch.float32, torch.bfloat16) if torch.ops.mkldnn._is_mkldnn_bf16_supported() else (torch.float32,)
-
-
-#: The dtypes in which `LinearReLU` runs oneDNN's fused op.
-FUSED_RELU_DTYPES = _onednn_dtypes()
-
-
-def _fuse_relus(mlp: nn.Sequential) -> None:
-    """Each Linear of `mlp` that a ReLU follows, BN folded to an Identity between them, becomes a `LinearReLU`."""
-    for i in range(len(mlp) - 2):
-        if type(mlp[i]) is nn.Linear and isinstance(mlp[i + 1], nn.Identity) and isinstance(mlp[i + 2], nn.ReLU):
-            mlp[i], mlp[i + 2] = LinearReLU.of(mlp[i]), nn.Identity()
-
-
-def _fuse_convolutions(maps: HeightMapModule) -> None:
-    """Each Conv2d of the height-map module's convolutional part becomes a `Conv2dReLU` and the ReLU after it an
-    Identity (so that layers keep their places); each max-pool of stride 1 a `SlidingMax`."""
-    for i in range(maps.n_convolutional):
-        if type(maps[i]) is nn.Conv2d and isinstance(maps[i + 1], nn.ReLU):
-            maps[i], maps[i + 1] = Conv2dReLU.of(maps[i]), nn.Identity()
-        elif SlidingMax.replaces(maps[i]):
-            maps[i] = SlidingMax(maps[i].kernel_size)
-
-
-def _check_precision(precision: str) -> None:
+def check_precision(precision: str) -> None:
+    """Raises for a precision not in PRECISIONS, before anything is changed."""
     if precision not in PRECISIONS:
         raise ValueError(f"precision '{precision}' is not one of {tuple(PRECISIONS)}")
 
 
-def _set_precision(model: RefineNet, precision: str) -> RefineNet:
+def set_precision(model: RefineNet, precision: str) -> RefineNet:
+    """`model` itself with its feature modules cast to `precision` (`reduced_precision` casts a copy)."""
     for module in (model.point_module, model.height_map_module):
         if module is not None:
             module.to(PRECISIONS[precision])

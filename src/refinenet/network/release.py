@@ -25,8 +25,9 @@ from refinenet.evaluation.metrics import unoriented_angles
 from refinenet.features.cache import Features
 from refinenet.geometry.scale import spacing_ratio
 from refinenet.network.clustering import ClusterModel, load_cluster_model
+from refinenet.network.fused import for_inference
 from refinenet.network.inference import load_networks, refine_normals
-from refinenet.network.model import NetworkConfig, RefineNet, architecture, count_parameters, for_inference
+from refinenet.network.model import NetworkConfig, RefineNet, architecture, count_parameters
 from refinenet.network.training import network_fingerprint
 
 BUNDLE, CARD_JSON, CARD_MD = "networks.pt", "model_card.json", "MODEL_CARD.md"

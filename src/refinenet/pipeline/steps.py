@@ -103,8 +103,8 @@ _DATA = ("data.clouds", "data.shapes", "data.meshes", "data.noise", "data.io")
 _GEOMETRY = ("geometry.neighbors", "geometry.grid_knn", "geometry.ball")
 _FEATURES = ("features.cache", "features.filtering", "features.heightmaps", "geometry.frames", *_GEOMETRY, "data.io",
              "data.noise", "estimators.baselines", "estimators.smooth_jet", "data.shapes", "data.meshes")
-_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.pooling", "network.devices",
-            "network.training", "features.patches", "evaluation.metrics")
+_NETWORK = (*_FEATURES, "network.clustering", "network.dataset", "network.model", "network.fused", "network.pooling",
+            "network.devices", "network.training", "features.patches", "evaluation.metrics")
 #: The pipeline's declarations, which a script reading the pipeline (`workflow.Pipeline`) imports together.
 _PIPELINE = ("pipeline.methods", "pipeline.layout", "pipeline.catalogue", "pipeline.variants", "pipeline.captions",
              "pipeline.page", "pipeline.steps", "pipeline.workflow", "data.scans")
