@@ -200,9 +200,9 @@ def test_other_settings_start_over(tmp_path, clouds):
     assert resumed.best_val_rmse_deg == fresh.best_val_rmse_deg
 
 
-@pytest.mark.parametrize("change", ["features", "code"])
+@pytest.mark.parametrize("change", ["features", "code", "torch"])
 def test_a_checkpoint_of_other_inputs_or_code_starts_over(tmp_path, clouds, monkeypatch, change):
-    """A step rerun because its features or its code changed trains anew instead of finishing the checkpoint's
+    """A step rerun because its features, its code or torch changed trains anew instead of finishing the checkpoint's
     run; the same inputs and code resume it."""
     config = train_config(batch_size=128, max_epochs=1, threads=1)
     more = replace(config, max_epochs=2)  # a resumable change: a resumed run trains one epoch, a new one two
@@ -217,6 +217,8 @@ def test_a_checkpoint_of_other_inputs_or_code_starts_over(tmp_path, clouds, monk
     rerun = clouds
     if change == "code":
         monkeypatch.setattr(training, "_code_digest", lambda: "other code")
+    elif change == "torch":
+        monkeypatch.setattr(torch, "__version__", "0.0.0")
     else:
         rerun = [replace(c, features=replace(c.features, nf=c.features.nf * np.float32(1.001))) for c in clouds]
     epochs.clear()

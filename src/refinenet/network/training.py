@@ -161,7 +161,7 @@ def _train(config: TrainConfig, network: NetworkConfig, data: ClusterData, out_d
     saved = torch.load(checkpoint, map_location=device, weights_only=True) if checkpoint.exists() else None
     best = checkpoint.with_name(BEST)
     if saved is not None and saved["fingerprint"] != fingerprint:
-        tqdm.write(f"{checkpoint}: written with other settings or data; starting over")
+        tqdm.write(f"{checkpoint}: written with other settings, data or code; starting over")
         saved = None
     if saved is not None and saved["best_epoch"] > 0 and not best.exists():
         tqdm.write(f"{checkpoint}: the best epoch's weights ({best.name}) are missing; starting over")
@@ -239,9 +239,10 @@ def _digest(*arrays: np.ndarray) -> str:
 
 
 def _code_digest() -> str:
-    """A short hash of the package's source: which module a change touches is not worth the risk of guessing."""
+    """A short hash of the package's source and of the torch and numpy versions, whose kernels the weights depend
+    on: which module a change touches is not worth the risk of guessing."""
     package = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
+    h = hashlib.sha256(f"torch {torch.__version__} numpy {np.__version__}".encode())
     for path in sorted(package.rglob("*.py")):
         h.update(path.relative_to(package).as_posix().encode())
         h.update(path.read_bytes())
