@@ -32,7 +32,9 @@ import psutil
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scratch import different_files, isolated, report_files, sh, smoke_copy  # noqa: E402
 
+from refinenet import config  # noqa: E402
 from refinenet.pipeline.catalogue import MAIN  # noqa: E402
+from refinenet.pipeline.workflow import Pipeline  # noqa: E402
 
 POLL = 0.02
 #: The main job (workflow.MAIN) through each tool: the whole chain, clouds to release, without the ablation variants
@@ -48,6 +50,22 @@ def start(repo: Path, tool: str, log: Path) -> subprocess.Popen:
     with open(log, "a") as out:
         return subprocess.Popen(COMMANDS[tool], cwd=repo, stdout=out, stderr=subprocess.STDOUT,
                                 start_new_session=True, env=isolated(repo))
+
+
+def snakemake_targets(repo: Path, tool: str) -> list[str]:
+    """What the tool's main job makes, as Snakemake targets: the `main` rule for Snakemake (the MAIN steps, the
+    release's training curves and the page of them); the MAIN steps' files for DVC (`dvc repro` of the MAIN stages
+    makes no page: the `report` stage is the page of every table)."""
+    if tool == "snakemake":
+        return ["main"]
+    steps = Pipeline(config.read_raw(repo / "params.yaml")).steps
+    return [target for name in MAIN for target in steps[name].targets()]
+
+
+def up_to_date(repo: Path, tool: str) -> bool:
+    """Neither tool has anything left to do for what the tool's main job makes."""
+    dry_run = sh(repo, sys.executable, "-m", "snakemake", "-n", *snakemake_targets(repo, tool)).stdout
+    return "Nothing to be done" in dry_run and not json.loads(sh(repo, "dvc", "status", "--json", *MAIN).stdout or "{}")
 
 
 def main_reports(repo: Path) -> dict[str, bytes]:
@@ -148,12 +166,11 @@ def kill_anywhere(tools: list[str], kills: int, seed: int, workdir: Path, refere
             sh(victim, *COMMANDS[tool], "--unlock")
         sh(victim, *COMMANDS[tool])
         different |= set(different_files(expected, main_reports(victim)))
-        up_to_date = ("Nothing to be done" in sh(victim, sys.executable, "-m", "snakemake", "-n", "main").stdout
-                      and not json.loads(sh(victim, "dvc", "status", "--json", *MAIN).stdout or "{}"))
         results["tools"][tool] = {"kills": len(hits), "copies": copies, "failed_restarts": failed,
                                   "during_write": aims["write"], "during_training": aims["training"],
                                   "different_files": sorted(different),
-                                  "identical_files": len(expected) - len(different), "up_to_date": up_to_date}
+                                  "identical_files": len(expected) - len(different),
+                                  "up_to_date": up_to_date(victim, tool)}
     return results
 
 
