@@ -44,6 +44,17 @@ def _evaluated(**overrides) -> RefineNet:
     return model.eval()
 
 
+def _with_and_without(fusion: str, precision: str) -> tuple[RefineNet, RefineNet]:
+    """The inference form of one network with and without one of fused.py's fusions (`_fuse_relus`,
+    `_fuse_convolutions`); skips where oneDNN's fused ops do not take the precision on this CPU."""
+    if PRECISIONS[precision] not in FUSED_RELU_DTYPES:
+        pytest.skip(f"oneDNN's fused ops do not take {precision} on this CPU")
+    model = _evaluated()
+    with mock.patch(f"refinenet.network.fused.{fusion}"):
+        without = for_inference(copy.deepcopy(model), True, precision)
+    return for_inference(model, True, precision), without
+
+
 def test_fused_copy_for_inference_gives_the_same_normals():
     model = _evaluated()
     fused = fuse_batch_norm(model)
@@ -75,16 +86,11 @@ def test_the_inference_layout_computes_what_the_training_layout_does(connection,
 def test_the_fused_relus_give_the_network_of_the_two_layers_bit_for_bit(precision):
     """`LinearReLU` takes the place of every ReLU of a BN-folded point MLP (the 3 -> 64 layer included), runs
     oneDNN's fused op where the CPU has it, and the network's outputs equal those of Linear then ReLU exactly."""
-    if PRECISIONS[precision] not in FUSED_RELU_DTYPES:
-        pytest.skip(f"oneDNN's fused linear does not take {precision} on this CPU")
-    model = _evaluated()
-    with mock.patch("refinenet.network.fused._fuse_relus"):
-        two_layers = for_inference(copy.deepcopy(model), True, precision)
-    fused = for_inference(model, True, precision)
+    fused, two_layers = _with_and_without("_fuse_relus", precision)
     mlp = fused.point_module.mlp
     assert sum(isinstance(layer, LinearReLU) for layer in mlp) == 4 and type(mlp[-2]) is torch.nn.Linear
     assert not any(isinstance(layer, torch.nn.ReLU) for layer in mlp)
-    inputs = _inputs(model.config, 150)
+    inputs = _inputs(fused.config, 150)
     counter = FlopCounterMode(display=False, custom_mapping={torch.ops.mkldnn._linear_pointwise: lambda *a, **k: 1})
     with torch.inference_mode():
         expected = two_layers(*inputs)
@@ -99,17 +105,12 @@ def test_the_fused_relus_give_the_network_of_the_two_layers_bit_for_bit(precisio
 def test_the_fused_convolutions_give_the_height_map_module_bit_for_bit(precision):
     """`Conv2dReLU` takes the place of every convolution and its ReLU, `SlidingMax` of every max-pool, and the
     network's outputs equal those of the layers as trained exactly."""
-    if PRECISIONS[precision] not in FUSED_RELU_DTYPES:
-        pytest.skip(f"oneDNN's fused ops do not take {precision} on this CPU")
-    model = _evaluated()
-    with mock.patch("refinenet.network.fused._fuse_convolutions"):
-        plain = for_inference(copy.deepcopy(model), True, precision)
-    fused = for_inference(model, True, precision)
+    fused, plain = _with_and_without("_fuse_convolutions", precision)
     maps = fused.height_map_module
     assert sum(isinstance(layer, Conv2dReLU) for layer in maps) == 5
     assert sum(isinstance(layer, SlidingMax) for layer in maps) == 2
     assert not any(isinstance(layer, torch.nn.ReLU | torch.nn.MaxPool2d) for layer in list(maps)[:maps.n_convolutional])
-    inputs = _inputs(model.config, 150)
+    inputs = _inputs(fused.config, 150)
     with torch.inference_mode():
         assert torch.equal(fused(*inputs), plain(*inputs))
     assert torch.equal(fused(*inputs).detach(), plain(*inputs).detach())  # with gradients: the layers themselves
