@@ -31,6 +31,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from scratch import different_files, isolated, report_files, sh, smoke_copy  # noqa: E402
 
+from refinenet import config  # noqa: E402
+from refinenet.pipeline.workflow import Pipeline  # noqa: E402
+
 PACKAGES = ("slurmctld", "slurmd", "slurm-client", "munge")
 CONF = Path("/etc/slurm/slurm.conf")
 #: The smoke pipeline through SLURM took 21 minutes while two other runs shared the 2 cores; a hung cluster fails.
@@ -38,10 +41,9 @@ LIMIT_S = 45 * 60
 MARK = "# written by tests/slurm_cluster.py; removed when the check ends\n"
 DAEMONS = ("slurmctld", "slurmd", "munged", "sbatch", "squeue")
 #: The repository's SLURM profile, with what this single node needs on top: no accounts, `squeue` polling at short
-#: intervals, and no GPU requests (the node has none; the smoke profile's device is auto).
-EXECUTOR = ("--profile", "workflow/profiles/slurm", "--jobs", "4", "--slurm-no-account",
-            "--slurm-status-command", "squeue", "--slurm-init-seconds-before-status-checks", "5", "--latency-wait", "5",
-            "--set-resources", "training:gpu=0", "inference:gpu=0")
+#: intervals (and no GPU requests: `executor`).
+PROFILE = ("--profile", "workflow/profiles/slurm", "--jobs", "4", "--slurm-no-account",
+           "--slurm-status-command", "squeue", "--slurm-init-seconds-before-status-checks", "5", "--latency-wait", "5")
 
 
 def missing() -> str | None:
@@ -152,6 +154,13 @@ def _wait(ready, seconds: float, failure: str) -> None:
         time.sleep(0.5)
 
 
+def executor(repo: Path) -> tuple[str, ...]:
+    """Snakemake's options for this node: PROFILE, and no GPU for any rule that asks for one (every variant's training
+    and inference: the node has none, and the smoke profile's device is auto)."""
+    steps = Pipeline(config.read_raw(repo / "params.yaml")).steps.values()
+    return (*PROFILE, "--set-resources", *(f"{s.name}:gpu=0" for s in steps if s.family in ("training", "inference")))
+
+
 def run_on_slurm(workdir: Path, reference: Path | None = None, log: Path | None = None) -> dict:
     """The smoke pipeline through `--executor slurm` in a fresh copy under `workdir`, compared with `reference`
     (a finished local smoke run; made here when not given); Snakemake's whole output goes to `log` if given."""
@@ -162,7 +171,7 @@ def run_on_slurm(workdir: Path, reference: Path | None = None, log: Path | None 
     with single_node_slurm(workdir / "cluster"):
         began = time.monotonic()
         try:
-            run = subprocess.run([sys.executable, "-m", "snakemake", *EXECUTOR], cwd=repo, capture_output=True,
+            run = subprocess.run([sys.executable, "-m", "snakemake", *executor(repo)], cwd=repo, capture_output=True,
                                  text=True, env=isolated(repo), timeout=LIMIT_S)
             returncode, output = run.returncode, run.stdout + run.stderr
         except subprocess.TimeoutExpired as err:
