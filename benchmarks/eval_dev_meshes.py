@@ -390,10 +390,16 @@ def _pair(v: dict[str, float]) -> str:
     return f"{v['mean']:.2f} / {v['rmse']:.2f}"
 
 
+def pooled_means(per_cloud: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    """Mean error per group of the `by` columns, one column per method, pooled over the groups' points (the sums of
+    their clouds' errors over the sums of their counts, so that a larger cloud weighs more)."""
+    sums = per_cloud.groupby([*by, "method"], sort=False)[["sum_deg", "n"]].sum()
+    return (sums["sum_deg"] / sums["n"]).unstack("method")
+
+
 def per_level(per_cloud: pd.DataFrame) -> pd.DataFrame:
     """Pooled mean error per (category, noise) and method, methods in METHODS' order."""
-    sums = per_cloud.groupby(["category", "noise", "method"], sort=False)[["sum_deg", "n"]].sum()
-    table = (sums["sum_deg"] / sums["n"]).unstack("method")
+    table = pooled_means(per_cloud, ["category", "noise"])
     table = table[[m for m in METHODS if m in table.columns]]
     table.index = [f"{c} {noise:.2f}" for c, noise in table.index]
     table.index.name = "category, noise"

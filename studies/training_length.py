@@ -25,7 +25,7 @@ from ruamel.yaml import YAML
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # the benchmarks' helpers
 
-from eval_dev_meshes import BIG_NOISE, NAMES, RESULTS, STEM, per_level  # noqa: E402
+from eval_dev_meshes import BIG_NOISE, NAMES, RESULTS, STEM, per_level, pooled_means  # noqa: E402
 from machine import machine_info, write_results  # noqa: E402
 
 from refinenet.pipeline.methods import FULL  # noqa: E402
@@ -132,8 +132,7 @@ def compare(shipped: dict, candidate: dict) -> dict:
 def per_mesh(rows: list[dict]) -> pd.DataFrame:
     """Mean error pooled over each mesh's BigNoise clouds, per method."""
     frame = pd.DataFrame(rows)
-    sums = frame[frame["category"] == BIG_NOISE].groupby(["mesh", "method"])[["sum_deg", "n"]].sum()
-    return (sums["sum_deg"] / sums["n"]).unstack("method")
+    return pooled_means(frame[frame["category"] == BIG_NOISE], ["mesh"]).sort_index()
 
 
 def markdown(record: dict) -> str:
