@@ -37,7 +37,7 @@ a plot of the mean error against the noise level per method and category, one ro
 the committed run of the same size (`--reuse`), whose clouds are the same: every cloud's seeds derive from the mesh
 and the level.
 
-`--release` evaluates another run's exported networks (its `src/refinenet/shipped` after `snakemake -j2 release`,
+`--release` evaluates another run's exported networks (its `results/release` after `snakemake -j2 release`,
 e.g. a candidate setting's) in place of the shipped ones; its results go under `--out`, a folder outside
 benchmarks/results, which holds the shipped networks' evaluation only.
 

@@ -28,6 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # t
 from eval_dev_meshes import BIG_NOISE, NAMES, RESULTS, STEM, per_level, pooled_means  # noqa: E402
 from machine import machine_info, write_results  # noqa: E402
 
+from refinenet import SHIPPED  # noqa: E402
+from refinenet.pipeline.layout import RELEASE  # noqa: E402
 from refinenet.pipeline.methods import FULL  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -43,12 +45,12 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "refinenet-training-length")
     args = parser.parse_args()
     profile = train_candidate(args.work, args.points_per_cloud)
-    cards = {name: json.loads((root / "src/refinenet/shipped/model_card.json").read_text())
-             for name, root in (("shipped", REPO), ("candidate", args.work))}
+    cards = {name: json.loads((folder / "model_card.json").read_text())
+             for name, folder in (("shipped", SHIPPED), ("candidate", args.work / RELEASE))}
     evaluation = args.work / "evaluation"
     if not evaluated(evaluation / f"{STEM}.json", args.sizes, cards["candidate"]["fingerprint"]):
         run([sys.executable, "benchmarks/eval_dev_meshes.py", "--methods", "refinenet", "--points",
-             *map(str, args.sizes), "--release", str(args.work / "src/refinenet/shipped"), "--out", str(evaluation)],
+             *map(str, args.sizes), "--release", str(args.work / RELEASE), "--out", str(evaluation)],
             REPO)
     shipped, candidate = (json.loads(p.read_text()) for p in (RESULTS / f"{STEM}.json", evaluation / f"{STEM}.json"))
     record = {"profile": profile, "points_per_cloud": args.points_per_cloud,

@@ -298,7 +298,7 @@ def test_a_variant_only_a_figure_shows_gets_the_steps_that_figure_needs():
     assert all(t.startswith("results/features/x8/train/") for t in STEPS["features_x8"].targets())
     assert STEPS["fig_real"].deps == ("results/scans", "results/clouds/train", "results/clusters/x8",
                                       "results/models/x8")
-    assert STEPS["table_scans"].deps == ("results/scans", "src/refinenet/shipped", "results/clouds/train",
+    assert STEPS["table_scans"].deps == ("results/scans", "results/release", "results/clouds/train",
                                          "results/clusters/x8", "results/models/x8")
     raw = yaml.safe_load((REPO / "params.yaml").read_text())
     raw["figures"]["variants"] = ["x8", "l1"]

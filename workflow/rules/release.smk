@@ -1,5 +1,6 @@
-# The shipped networks (src/refinenet/shipped): the trained networks, the cluster model and the run's settings in
-# one file that `refinenet normals` loads without training, with a model card. Committed to git, not DVC-cached.
+# The run's release (results/release): the trained networks, the cluster model and the run's settings in one file
+# that `refinenet normals --release` loads without training, with a model card. The shipped networks are a copy of
+# one profile's (README, "The networks").
 
 
 rule release:

@@ -12,7 +12,6 @@ from typing import Any
 import yaml
 
 from refinenet import config
-from refinenet.pipeline.layout import RELEASE
 from refinenet.pipeline.steps import tracked_keys
 from refinenet.pipeline.workflow import Pipeline
 
@@ -29,7 +28,7 @@ def dvc_yaml(raw: dict[str, Any]) -> dict[str, Any]:
             "cmd": f"python -m refinenet.pipeline.bridge run {step.name}",
             "deps": [*step.code, *step.deps],
             "params": tracked_keys(raw, step),
-            "outs": [{o: {"cache": False}} if o.startswith(("reports/", RELEASE)) else o for o in step.outs],
+            "outs": [{o: {"cache": False}} if o.startswith("reports/") else o for o in step.outs],
         }
         if step.metrics:
             stage["metrics"] = [{m: {"cache": False}} for m in step.metrics]

@@ -19,8 +19,9 @@ HISTORY_DIR = "results/history/{variant}"
 HISTORY = f"{HISTORY_DIR}/cluster_{{cluster}}.csv"
 #: Resumable training state, outside every step's outputs so that neither tool clears it before a rerun.
 CHECKPOINT_DIR = "results/checkpoints/{variant}"
-#: The shipped release (`refinenet.SHIPPED`): committed with the package, so it is not DVC-cached.
-RELEASE = "src/refinenet/shipped"
+#: The run's release, which `refinenet normals --release` loads. The package's own (`refinenet.SHIPPED`) is a copy
+#: of one profile's (README, "The networks"), so that no run replaces the networks a clone was given.
+RELEASE = "results/release"
 #: Each per-cloud job's log and Snakemake benchmark file (wall seconds, peak memory), by step: a method
 #: (`mfps`) or a per-variant family and its variant (`features/full`).
 JOB_LOG = "logs/{step}/{cloud}.log"
