@@ -10,6 +10,7 @@ import numpy as np
 from refinenet import config
 from refinenet.data.io import read_cloud
 from refinenet.data.noise import derive_seed
+from refinenet.data.shapes import catalogue
 from refinenet.errors import InputError
 from refinenet.features.cache import load_for_cloud
 from refinenet.network.clustering import load_cluster_model
@@ -63,6 +64,8 @@ def main(params, args):
             "points_per_cloud": int(np.median([len(c) for c in clouds])),
             "noise_percent": sorted({c.meta.get("noise_percent") for c in clouds} - {None}),
             "spacing_ratio": training_spacing([c.points for c in clouds]),
+            "meshes": sorted({c.meta["origin"] for c in clouds  # the files of the synthesised clouds
+                              if c.meta.get("noise_percent") is not None and c.meta["origin"] not in catalogue()}),
         },
         "clusters": {str(c): json.loads((Path(folder) / RESULT).read_text()) for c, folder in enumerate(args.networks)},
         "half_precision": half_precision_change(checks, model, networks, params.patches, params.inference,

@@ -121,6 +121,62 @@ def test_points_folder(tmp_path):
         make_cloud(specs[2], 0, seed=0)
 
 
+CUBE_OFF = """OFF
+8 12 0
+0 0 0
+1 0 0
+1 1 0
+0 1 0
+0 0 1
+1 0 1
+1 1 1
+0 1 1
+3 0 2 1
+3 0 3 2
+3 4 5 6
+3 4 6 7
+3 0 1 5
+3 0 5 4
+3 2 3 7
+3 2 7 6
+3 1 2 6
+3 1 6 5
+3 0 4 7
+3 0 7 3
+"""
+
+
+def test_training_meshes_join_the_training_clouds_of_any_source(tmp_path):
+    """data.train_meshes adds its train split (never its test split) at the training levels, after the source's
+    own clouds, which stay as they were; a mesh's clouds do not depend on where its folder lies."""
+    for folder in ("meshes", "moved"):
+        for split, name in (("train", "box"), ("test", "held_out")):
+            (tmp_path / folder / split / "sharp").mkdir(parents=True)
+            (tmp_path / folder / split / "sharp" / f"{name}.off").write_text(CUBE_OFF)
+    procedural = list_clouds(data_block(), BASE.noise)
+    specs = list_clouds(data_block(train_meshes=str(tmp_path / "meshes")), BASE.noise)
+    assert specs[:len(procedural)] == procedural
+    assert [s.key for s in specs[len(procedural):]] == [f"train/SharpFeature/box_n{level:.2f}"
+                                                        for level in BASE.noise.train]
+    cloud = make_cloud(specs[-1], 3000, seed=1)
+    moved = make_cloud(list_clouds(data_block(train_meshes=str(tmp_path / "moved")), BASE.noise)[-1], 3000, seed=1)
+    np.testing.assert_array_equal(moved.points, cloud.points)
+    assert (cloud.points.min() > -0.05) and (cloud.points.max() < 1.05)
+    axis = np.abs(cloud.normals).argmax(axis=1)  # a cube's face normals are the coordinate axes
+    assert np.allclose(np.abs(cloud.normals[np.arange(3000), axis]), 1)
+
+
+def test_bad_training_meshes(tmp_path):
+    with pytest.raises(ParamsError, match="data.train_meshes: '.*nowhere' is not a folder"):
+        list_clouds(data_block(train_meshes=str(tmp_path / "nowhere")), BASE.noise)
+    with pytest.raises(ParamsError, match="data.train_meshes: no meshes in"):
+        list_clouds(data_block(train_meshes=str(tmp_path)), BASE.noise)
+    (tmp_path / "train" / "sharp").mkdir(parents=True)
+    (tmp_path / "train" / "sharp" / "fandisk_b.off").write_text(CUBE_OFF)  # a procedural training shape's name
+    with pytest.raises(ParamsError, match="a mesh named as a cloud of data.source: train/SharpFeature/fandisk_b_n"):
+        list_clouds(data_block(train_meshes=str(tmp_path)), BASE.noise)
+
+
 def test_bad_source_settings(tmp_path):
     with pytest.raises(ParamsError, match="data.path"):
         list_clouds(data_block(source="meshes", path=str(tmp_path / "nowhere")), BASE.noise)

@@ -1,5 +1,5 @@
 """A release's format: an export writes the present one with every setting, an older one loads through the explicit
-mapping of what it lacks (`release.FORMAT_1`), and one this version cannot read is a one-line error."""
+mappings of what it lacks (`release.FORMAT_1`, `FORMAT_2`), and one this version cannot read is a one-line error."""
 
 import json
 
@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from refinenet.errors import InputError, ParamsError
-from refinenet.network.release import FORMAT, FORMAT_1, SHIPPED, export, load_release
+from refinenet.network.release import FORMAT, FORMAT_1, FORMAT_2, SHIPPED, export, load_release
 
 
 @pytest.fixture(scope="module")
@@ -60,15 +60,22 @@ def test_a_format_1_release_loads_the_settings_it_lacks_with_their_format_1_valu
     assert [net.config.output for net in release.networks.values()] == ["normal"]
 
 
+def test_a_format_2_release_loads_without_training_meshes(tmp_path, shipped):
+    bundle, card = shipped
+    folder = write(tmp_path / "old", {**without(bundle, FORMAT_2), "format": 2}, card)
+    assert load_release(folder, with_networks=False).params.data.train_meshes is None
+
+
 def test_an_export_writes_the_present_format_with_every_setting(tmp_path, shipped):
     bundle, card = shipped
     release = load_release(with_networks=False)
-    export(tmp_path, json.loads(bundle["params"]), release.cluster_model, {0: bundle["networks"]["0"]},
-           bundle["network"], card)
+    params = json.loads(bundle["params"])
+    params["data"] |= FORMAT_2["data"]
+    export(tmp_path, params, release.cluster_model, {0: bundle["networks"]["0"]}, bundle["network"], card)
     written = torch.load(tmp_path / "networks.pt", weights_only=True)
-    assert written["format"] == FORMAT == 2
+    assert written["format"] == FORMAT == 3
     assert load_release(tmp_path, with_networks=False).params == release.params
-    # From format 2 nothing is filled in: a setting missing from such a release is an error naming it.
+    # From format 3 nothing is filled in: a setting missing from such a release is an error naming it.
     write(tmp_path, without(written, {"training": ["precision"]}), card)
     with pytest.raises(ParamsError) as info:
         load_release(tmp_path, with_networks=False)

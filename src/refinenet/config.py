@@ -73,6 +73,9 @@ class DataConfig:
     """Points sampled per shape or mesh (synthesised sources)."""
     max_shapes: int | None
     """At most this many shapes per split and category; None: all."""
+    train_meshes: str | None
+    """A folder in the meshes source's layout whose train split joins the training clouds of any source: real
+    shapes beside the procedural ones (docs/accuracy.md); None: none."""
     pcpnet: PCPNetLists
 
     def __post_init__(self) -> None:

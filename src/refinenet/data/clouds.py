@@ -5,14 +5,15 @@ Four sources, chosen by `data.source` in params.yaml (`DataConfig`):
 * `meshes`: a folder `PATH/<split>/<category>/*.{off,obj,ply}`, sampled the same way;
 * `pcpnet`: a PCPNet-format folder (`.xyz`, `.normals`, optional `.pidx`) with list files, used as given;
 * `points`: a folder `PATH/<split>/<category>/*.{xyz,ply,pcd,npy}` of clouds with normals, used as given.
-Splits are `train` and `test`; categories are those of the paper's tables.
+Splits are `train` and `test`; categories are those of the paper's tables. `data.train_meshes` adds the train split
+of a folder of meshes to any source's training clouds.
 """
 
 from __future__ import annotations
 
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -81,6 +82,23 @@ def list_clouds(data: DataConfig, noise: NoiseConfig) -> list[CloudSpec]:
         raise ParamsError("data.source", f"unknown source '{source}' (procedural, meshes, pcpnet or points)")
     if not any(s.split == "test" for s in specs):
         raise ParamsError("data.path", f"the {source} source yields no test clouds")
+    return specs + _train_meshes(data, noise, {s.key for s in specs})
+
+
+def _train_meshes(data: DataConfig, noise: NoiseConfig, taken: set[str]) -> list[CloudSpec]:
+    """The training clouds of `data.train_meshes`: its train split, sampled and noised as the meshes source's."""
+    if data.train_meshes is None:
+        return []
+    folder = Path(data.train_meshes)
+    if not folder.is_dir():
+        raise ParamsError("data.train_meshes", f"'{folder}' is not a folder")
+    specs = [s for s in _folder(replace(data, path=str(folder)), noise, MESH_SUFFIXES, synthesise=True)
+             if s.split == "train"]
+    if not specs:
+        raise ParamsError("data.train_meshes", f"no meshes in '{folder / data.split_folders['train']}/<category>/'")
+    clash = sorted(taken & {s.key for s in specs})
+    if clash:
+        raise ParamsError("data.train_meshes", f"a mesh named as a cloud of data.source: {clash[0]}")
     return specs
 
 
@@ -150,8 +168,9 @@ def _pcpnet(data: DataConfig) -> list[CloudSpec]:
 def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -> Cloud:
     """Build one cloud: sample a shape or mesh and add seeded noise, or read a given file.
 
-    The clean sample of a shape depends only on the shape (so every noise level perturbs the same points);
-    the noise seed depends on the cloud. Both seeds, the noise sigma and l_d are recorded in `meta`.
+    The clean sample of a shape depends only on the shape, a mesh's on its file name and not on the folder it lies
+    in (so every noise level perturbs the same points, wherever the meshes are); the noise seed depends on the
+    cloud. Both seeds, the noise sigma and l_d are recorded in `meta`.
     """
     meta: dict[str, Any] = {"split": spec.split, "category": spec.category, "name": spec.name, "origin": spec.origin}
     if spec.noise is None:
@@ -163,7 +182,7 @@ def make_cloud(spec: CloudSpec, n_points: int, seed: int, min_points: int = 1) -
             meta["pidx"] = _read_pidx(pidx, len(cloud))
         meta.update(noise_percent=None, l_d=bbox_diagonal(cloud.points))
         return Cloud(cloud.points, cloud.normals, meta)
-    sample_seed = derive_seed(seed, "sample", spec.origin)
+    sample_seed = derive_seed(seed, "sample", Path(spec.origin).name)
     clean, normals = _sample(spec.origin, n_points, sample_seed)
     noise_seed = derive_seed(seed, "noise", spec.key)
     l_d = bbox_diagonal(clean)

@@ -31,9 +31,9 @@ from refinenet.network.model import NetworkConfig, RefineNet, architecture, coun
 from refinenet.network.training import network_fingerprint
 
 BUNDLE, CARD_JSON, CARD_MD = "networks.pt", "model_card.json", "MODEL_CARD.md"
-#: Format of the bundle (its `format`): from 2, the params hold every setting. A loader upgrades an older format
-#: (`_upgrade`) and refuses a newer one rather than misreading it.
-FORMAT = 2
+#: Format of the bundle (its `format`): from 2, the params hold every setting of their version. A loader upgrades
+#: an older format (`_upgrade`) and refuses a newer one rather than misreading it.
+FORMAT = 3
 #: The settings that a release of format 1 may lack, added to params.yaml after the first of them was exported, with
 #: the value that each such release was trained (or, for `denoise` and `figures`, is used) with; `network.output`
 #: is also that of its network description.
@@ -45,6 +45,8 @@ FORMAT_1 = {
     "denoise": {"iterations": 20, "lam": 0.5, "sigma": 0.35, "radius": 0.01, "poisson_depth": 8},
     "figures": {"variants": [], "scans": None, "scan_points": None},
 }
+#: The settings that a release of format 2 lacks, with the value that each such release was trained with.
+FORMAT_2 = {"data": {"train_meshes": None}}
 
 
 @dataclass(frozen=True)
@@ -149,8 +151,10 @@ def load_release(folder: str | Path = SHIPPED, device: str | torch.device = "cpu
 
 def _upgrade(resolved: dict[str, Any], network: dict[str, Any], version: int) -> tuple[dict[str, Any], dict[str, Any]]:
     """A release's params and network description, stored in format `version`, as the present format holds them."""
+    added = [FORMAT_1] * (version <= 1) + [FORMAT_2] * (version <= 2)
+    for settings in added:
+        resolved = resolved | {block: values | resolved.get(block, {}) for block, values in settings.items()}
     if version == 1:
-        resolved = resolved | {block: values | resolved.get(block, {}) for block, values in FORMAT_1.items()}
         network = FORMAT_1["network"] | network
     return resolved, network
 
@@ -211,6 +215,8 @@ def model_card_markdown(card: dict[str, Any]) -> str:
         "",
         f"- Source: {data['source']}; {data['clouds']} training clouds of {data['points_per_cloud']:,} points, "
         f"Gaussian noise {', '.join(map(str, data['noise_percent']))}% of the bounding-box diagonal.",
+        *([f"- Sampled from meshes ({len(data['meshes'])}): "
+           + ", ".join(f"`{m}`" for m in data["meshes"]) + "."] if data.get("meshes") else []),
         "- Training: " + ", ".join(f"{k} {v}" for k, v in card["training"].items()
                                    if k not in ("device", "threads", "seed")) + ".",
         "",
